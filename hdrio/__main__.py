@@ -1,0 +1,5 @@
+import sys
+
+from hdrio.cli import main
+
+sys.exit(main())

@@ -1,0 +1,142 @@
+"""Exposure of each bracket: explicit values, sidecar lists, EXIF, or the file name.
+
+Precedence (first that covers every file wins): values given explicitly; a sidecar list;
+EXIF; the tutorial's file-name convention. One source serves the whole set, so a stack
+never mixes, say, EXIF times for some frames with file-name times for others.
+
+Sidecar formats
+---------------
+CSV with a header naming ``file`` and ``exposure_time_s`` (other columns are ignored)::
+
+    file,exposure_time_s
+    church_1.png,0.5
+
+OpenCV's ``list.txt`` (as read by ``loadExposureSeq``): one ``file value`` per line where
+the value is the *reciprocal* of the exposure time, ``1/t``; ``#`` starts a comment.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Mapping, Sequence
+from fractions import Fraction
+from pathlib import Path
+
+from hdrio.errors import InputError
+
+_INTEGER = re.compile(r"\d+")
+
+
+def parse_exposure(text: str | float) -> float:
+    """Parse ``"1/60"``, ``"0.5"``, ``"30"`` or a number into seconds (a positive float)."""
+    if isinstance(text, int | float):
+        value = float(text)
+    else:
+        try:
+            value = float(Fraction(text.strip()))
+        except (ValueError, ZeroDivisionError):
+            raise ValueError(f"not an exposure time: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise ValueError(f"exposure time must be positive and finite: {text!r}")
+    return value
+
+
+def exposure_from_filename(path: str | Path) -> float | None:
+    """The tutorial's convention: two integers in the name are numerator and denominator.
+
+    ``church_30_1.jpg`` is 30 s, ``window exp 1 60.jpg`` is 1/60 s. Names with any other
+    count of integers (``IMG_2600.jpg``) give ``None``: guessing would be worse than asking.
+
+    >>> exposure_from_filename("window exp 1 60.jpg") == 1 / 60
+    True
+    >>> exposure_from_filename("IMG_2600.jpg") is None
+    True
+    """
+    numbers = _INTEGER.findall(Path(path).stem)
+    if len(numbers) != 2 or int(numbers[1]) == 0 or int(numbers[0]) == 0:
+        return None
+    return int(numbers[0]) / int(numbers[1])
+
+
+def read_exposure_table(path: str | Path) -> dict[str, float]:
+    """Read a sidecar list into ``{file name: exposure time in seconds}``.
+
+    Names are kept as written (relative paths allowed); lookups match on the name or the
+    base name. Raises :class:`InputError` naming the sidecar and the line at fault.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as error:
+        raise InputError(path, f"cannot read exposure list ({error.strerror})") from None
+    lines = [line for line in text.splitlines() if line.strip()]
+    if not lines:
+        raise InputError(path, "exposure list is empty")
+    if "," in lines[0]:
+        return _read_csv_table(path, text)
+    return _read_opencv_list(path, lines)
+
+
+def _read_csv_table(path: Path, text: str) -> dict[str, float]:
+    rows = csv.DictReader(line for line in text.splitlines() if not line.startswith("#"))
+    fields = {name.strip().lower(): name for name in rows.fieldnames or []}
+    if "file" not in fields or "exposure_time_s" not in fields:
+        raise InputError(path, "CSV exposure list needs the columns 'file' and 'exposure_time_s'")
+    table: dict[str, float] = {}
+    for number, row in enumerate(rows, start=2):
+        name = (row[fields["file"]] or "").strip()
+        try:
+            table[name] = parse_exposure(row[fields["exposure_time_s"]] or "")
+        except ValueError as error:
+            raise InputError(path, f"line {number}: {error}") from None
+    return table
+
+
+def _read_opencv_list(path: Path, lines: Sequence[str]) -> dict[str, float]:
+    table: dict[str, float] = {}
+    for number, line in enumerate(lines, start=1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split()
+        if len(parts) != 2:
+            raise InputError(path, f"line {number}: expected 'file 1/t', got {line!r}")
+        try:
+            table[parts[0]] = 1.0 / parse_exposure(parts[1])
+        except ValueError as error:
+            raise InputError(path, f"line {number}: {error}") from None
+    return table
+
+
+def lookup_in_table(table: Mapping[str, float], file: str | Path) -> float | None:
+    """Find ``file`` in a sidecar table by its name as given, else by its base name."""
+    file = Path(file)
+    for key in (str(file), file.name):
+        if key in table:
+            return table[key]
+    by_name = {Path(name).name: value for name, value in table.items()}
+    return by_name.get(file.name)
+
+
+def exposure_from_exif(exif: Mapping[str, float | None]) -> tuple[float, float, float] | None:
+    """``(time_s, f_number, iso)`` from EXIF fields; ``None`` without an exposure time."""
+    time = exif.get("ExposureTime")
+    if not time or time <= 0:
+        return None
+    return float(time), float(exif.get("FNumber") or 0.0), float(exif.get("ISO") or 0.0)
+
+
+def relative_exif_exposures(readings: Sequence[tuple[float, float, float]]) -> list[float]:
+    """Exposure times, scaled by ``ISO/100 / N**2`` when aperture or ISO vary in the set.
+
+    With constant aperture and ISO the plain time (seconds) is kept, so values stay
+    recognisable; when they vary, each becomes ``t * ISO/100 / N**2`` (all three needed).
+    """
+    numbers = {reading[1] for reading in readings}
+    isos = {reading[2] for reading in readings}
+    if len(numbers) == 1 and len(isos) == 1:
+        return [reading[0] for reading in readings]
+    if any(n <= 0 or iso <= 0 for _, n, iso in readings):
+        raise ValueError("aperture or ISO vary across the set, but some frames lack them")
+    return [t * iso / 100.0 / n**2 for t, n, iso in readings]

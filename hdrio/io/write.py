@@ -1,0 +1,97 @@
+"""Write images atomically with OpenImageIO: a temp file beside the target, then rename.
+
+A crash, a full disk or an exception leaves either the previous file or none, never a
+half-written EXR.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from hdrio.errors import HdrioError
+
+HALF_MAX = 65504.0
+HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
+
+
+class OutputError(HdrioError):
+    """An output could not be written (the message names the file)."""
+
+
+def _type_of(value) -> tuple[str, object]:
+    """The OpenImageIO type name and value for an attribute (scalars, strings, arrays)."""
+    if isinstance(value, bool):
+        return "int", int(value)
+    if isinstance(value, int | np.integer):
+        return "int", int(value)
+    if isinstance(value, float | np.floating):
+        return "float", float(value)
+    if isinstance(value, str):
+        return "string", value
+    if isinstance(value, np.ndarray | Sequence) and len(value) > 0:
+        items = list(np.asarray(value).reshape(-1)) if isinstance(value, np.ndarray) else value
+        if all(isinstance(item, str) for item in items):
+            return f"string[{len(items)}]", tuple(items)
+        if all(isinstance(item, int | np.integer) for item in items):
+            return f"int[{len(items)}]", tuple(int(item) for item in items)
+        return f"float[{len(items)}]", tuple(float(item) for item in items)
+    raise TypeError(f"cannot store attribute value {value!r}")
+
+
+def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
+                attributes: Mapping[str, object] | None = None) -> Path:
+    """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise OutputError(f"{path}: folder {path.parent} does not exist")
+    pixels = np.ascontiguousarray(pixels)
+    height, width, channels = pixels.shape
+    spec = oiio.ImageSpec(width, height, channels, pixel_type)
+    for name, value in (attributes or {}).items():
+        type_name, stored = _type_of(value)
+        spec.attribute(name, oiio.TypeDesc(type_name), stored)
+    temp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+    try:
+        output = oiio.ImageOutput.create(str(temp))
+        if output is None:
+            raise OutputError(f"{path}: cannot write this format ({oiio.geterror().strip()})")
+        try:
+            if not output.open(str(temp), spec) or not output.write_image(pixels):
+                raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+        finally:
+            output.close()
+        os.replace(temp, path)
+    finally:
+        if temp.exists():
+            temp.unlink()
+    return path
+
+
+def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
+              pixel_type: str = "half", compression: str = "zip") -> Path:
+    """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
+
+    Half floats hold 2**-24 .. 65504: values beyond are clamped into that range (so no
+    pixel becomes 0 or Inf); callers keep radiance inside it (see
+    :func:`hdrio.pipeline.half_safe_scale`).
+    """
+    if pixel_type not in ("half", "float"):
+        raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if pixel_type == "half":
+        rgb = np.clip(rgb, HALF_MIN_POSITIVE, HALF_MAX)
+    attributes = {"compression": compression, **(attributes or {})}
+    return write_image(path, rgb, pixel_type, attributes)
+
+
+def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:
+    """Write display-referred RGB in [0, 1] (already encoded) as an 8-bit image."""
+    codes = np.round(np.clip(display_rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return write_image(path, codes, "uint8")

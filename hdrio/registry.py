@@ -1,0 +1,54 @@
+"""A case-insensitive method registry with aliases (after colour-science's ``*_METHODS``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from typing import Generic, TypeVar
+
+T = TypeVar("T", bound=Callable)
+
+
+class MethodRegistry(Mapping[str, T], Generic[T]):
+    """Map method names (and aliases) to callables, ignoring case, ``-`` and ``_``.
+
+    >>> methods = MethodRegistry("weighting", {"Debevec1997": abs},
+    ...                          aliases={"triangle": "Debevec1997"})
+    >>> methods["TRIANGLE"] is abs
+    True
+    """
+
+    def __init__(
+        self, kind: str, methods: Mapping[str, T], aliases: Mapping[str, str] | None = None
+    ) -> None:
+        self.kind = kind
+        self._methods = dict(methods)
+        self._aliases = dict(aliases or {})
+        self._lookup = {self._key(name): name for name in self._methods}
+        for alias, target in self._aliases.items():
+            self._lookup[self._key(alias)] = target
+
+    @staticmethod
+    def _key(name: str) -> str:
+        return name.lower().replace("-", "").replace("_", "")
+
+    def canonical(self, name: str) -> str:
+        """The canonical name of ``name``; raises ``KeyError`` listing the choices."""
+        try:
+            return self._lookup[self._key(name)]
+        except KeyError:
+            raise KeyError(
+                f"unknown {self.kind} method {name!r}; choose from {', '.join(self.names())}"
+            ) from None
+
+    def names(self) -> list[str]:
+        """Canonical names followed by aliases, as a user may type them."""
+        return [*self._methods, *self._aliases]
+
+    def __getitem__(self, name: str) -> T:
+        return self._methods[self.canonical(name)]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._methods)
+
+    def __len__(self) -> int:
+        return len(self._methods)

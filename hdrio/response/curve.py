@@ -1,0 +1,79 @@
+"""``CameraResponse``: the inverse response ``g = ln f^-1`` per channel, as a lookup table."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CameraResponse:
+    """A camera's inverse response, tabulated at every code value.
+
+    Attributes
+    ----------
+    log_inverse
+        ``g(z) = ln f^-1(z)``, shape ``(code_max + 1, C)``: natural log of the relative
+        exposure ``E * dt`` that produces code ``z``; ``g(z_mid) = 0``.
+    code_max
+        Largest code value (255 for 8-bit, 65535 for 16-bit).
+    supported
+        ``(code_max + 1, C)`` booleans: codes that carried weighted samples in the solve.
+        Elsewhere ``g`` is extrapolated (by the smoothness term, or linearly where
+        nothing constrains it).
+    method, parameters
+        How it was made (recorded in the EXR's ``hdrio:`` attributes).
+    """
+
+    log_inverse: np.ndarray
+    code_max: int
+    supported: np.ndarray
+    method: str = "Debevec1997"
+    parameters: dict = field(default_factory=dict)
+
+    @property
+    def channels(self) -> int:
+        return int(self.log_inverse.shape[1])
+
+    def linearise(self, codes: np.ndarray) -> np.ndarray:
+        """``f^-1(Z)``: relative exposure for code values ``(..., C)``."""
+        return np.exp(self.log_inverse[codes, np.arange(self.channels)])
+
+
+def fill_unsupported(g: np.ndarray, determined: np.ndarray) -> np.ndarray:
+    """Replace undetermined entries of ``g`` by linear extrapolation from the nearest ends.
+
+    Undetermined entries lie only outside the determined run (weights vanish at the ends
+    of the code range), so a straight continuation of the end slope is the smoothest
+    fill, the same one the smoothness term produces where it is active.
+    """
+    g = np.array(g, dtype=np.float64)
+    index = np.flatnonzero(determined)
+    if index.size < 2:
+        return g
+    first, last = index[0], index[-1]
+    low_slope = g[min(first + 1, last)] - g[first]
+    high_slope = g[last] - g[max(last - 1, first)]
+    below = np.arange(first)
+    above = np.arange(last + 1, g.size)
+    g[below] = g[first] - low_slope * (first - below)
+    g[above] = g[last] + high_slope * (above - last)
+    inner = np.arange(first, last + 1)
+    gaps = ~determined[inner]
+    if np.any(gaps):
+        g[inner[gaps]] = np.interp(inner[gaps], index, g[index])
+    return g
+
+
+def monotone_non_decreasing(g: np.ndarray, anchor: int) -> np.ndarray:
+    """Make ``g`` non-decreasing, keeping ``g[anchor]``: a response cannot fall.
+
+    Above the anchor a running maximum, below it a running minimum taken from the anchor
+    downwards; noise-driven wiggles at the ends (where few samples fall) are flattened
+    rather than inverted.
+    """
+    g = np.array(g, dtype=np.float64)
+    g[anchor:] = np.maximum.accumulate(g[anchor:])
+    g[: anchor + 1] = np.minimum.accumulate(g[anchor::-1])[::-1]
+    return g

@@ -1,0 +1,279 @@
+"""Debevec & Malik (1997) camera response recovery, as a sparse least-squares problem.
+
+The objective is the tutorial's ``gsolve.m`` exactly. Unknowns are ``g(z)`` for every code
+level ``z`` (``n`` of them) and ``ln E_i`` for every sample ``i`` (``N`` of them); rows are
+
+* data, one per sample ``i`` and bracket ``j``:  ``w(Z_ij) (g(Z_ij) - ln E_i) = w(Z_ij) ln dt_j``
+* the gauge ``g(z_mid) = 0`` (``z_mid = n // 2``, code 128 for 8-bit)
+* smoothness for ``z = 1 .. n-2``:  ``lambda w(z) (g(z-1) - 2 g(z) + g(z+1)) = 0``
+
+The matrix ``A`` ((N P + n - 1) x (n + N)) is stored sparse and never densified. We solve
+the normal equations by eliminating the ``ln E`` block, whose normal matrix is diagonal:
+the Schur complement is an ``n x n`` matrix, so the work is ``O(N P + n^3)`` whatever the
+sample count, and two steps of iterative refinement against the sparse residual bring the
+result to the accuracy of a dense least-squares solve. Normal equations square the
+condition number, so when the reduced matrix is ill-conditioned (a huge ``lambda``, say)
+we solve the same reduced problem by SVD instead: the ``ln E`` unknowns are projected out
+of each sample's rows, leaving a dense ``(N P + n - 1) x n`` least-squares problem whose
+singular values also tell a genuinely undetermined response from a merely stiff one.
+
+Unknowns that no equation touches (codes whose weight is zero and that no active
+smoothness row reaches, samples with zero weight in every bracket) take the value 0, as
+the minimum-norm solution of ``numpy.linalg.lstsq`` (and MATLAB's ``pinv``) would.
+
+References
+----------
+Debevec, P. E., & Malik, J. (1997). Recovering high dynamic range radiance maps from
+photographs. SIGGRAPH 97, 369-378. doi:10.1145/258734.258884
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+
+from hdrio.errors import ResponseSolveError
+
+DEFAULT_SMOOTHING = 50.0
+_NORMAL_RCOND = 1e-12  # below this eigenvalue ratio, the normal equations lose digits
+_SVD_RCOND = 1e-13  # below this singular value ratio, the response is undetermined
+_UNDETERMINED = (
+    "the samples do not determine the camera response (the brackets show too little "
+    "variation between exposures: a flat, constant or fully clipped scene?); use more or "
+    "better-exposed brackets, or a saved response"
+)
+
+
+def debevec1997_system(Z, log_exposures, smoothing: float, weights) -> tuple[sp.csr_matrix,
+                                                                            np.ndarray]:
+    """The sparse matrix ``A`` and right-hand side ``b`` of the tutorial's objective.
+
+    ``Z`` is ``(N, P)`` integer code levels in ``0 .. n-1``; ``log_exposures`` is ``(P,)``
+    (or ``(N, P)``) ``ln dt_j``; ``weights`` is ``w`` at each of the ``n`` levels.
+    """
+    Z = np.asarray(Z, dtype=np.int64)
+    weights = np.asarray(weights, dtype=np.float64)
+    n = weights.size
+    n_samples, n_brackets = Z.shape
+    B = np.broadcast_to(np.asarray(log_exposures, dtype=np.float64), Z.shape)
+    w = weights[Z].reshape(-1)
+    data_rows = np.arange(n_samples * n_brackets)
+    sample_of_row = np.repeat(np.arange(n_samples), n_brackets)
+
+    z_inner = np.arange(1, n - 1)
+    lam_w = smoothing * weights[z_inner]
+    smooth_rows = n_samples * n_brackets + 1 + np.arange(n - 2)
+
+    rows = np.concatenate([data_rows, data_rows, [n_samples * n_brackets],
+                           np.repeat(smooth_rows, 3)])
+    cols = np.concatenate([Z.reshape(-1), n + sample_of_row, [n // 2],
+                           np.stack([z_inner - 1, z_inner, z_inner + 1], axis=1).reshape(-1)])
+    values = np.concatenate([w, -w, [1.0],
+                             (lam_w[:, None] * np.array([1.0, -2.0, 1.0])).reshape(-1)])
+    shape = (n_samples * n_brackets + 1 + n - 2, n + n_samples)
+    A = sp.csr_matrix((values, (rows, cols)), shape=shape)
+    b = np.zeros(shape[0])
+    b[: n_samples * n_brackets] = w * B.reshape(-1)
+    return A, b
+
+
+class _IllConditioned(Exception):
+    pass
+
+
+class _ReducedNormalSolver:
+    """Solve ``A^T A x = r`` by eliminating the diagonal ``ln E`` block (Schur complement)."""
+
+    def __init__(self, A: sp.csr_matrix, n: int) -> None:
+        normal = (A.T @ A).tocsr()
+        self.n = n
+        g_g = normal[:n, :n].toarray()
+        self.g_l = normal[:n, n:].tocsr()
+        l_diag = normal.diagonal()[n:]
+        self.l_inverse = np.divide(1.0, l_diag, out=np.zeros_like(l_diag), where=l_diag > 0)
+        schur = g_g - (self.g_l @ sp.diags(self.l_inverse) @ self.g_l.T).toarray()
+        self.g_active = np.diag(g_g) > 0
+        reduced = schur[np.ix_(self.g_active, self.g_active)]
+        eigenvalues = np.linalg.eigvalsh(reduced)
+        if eigenvalues[0] <= _NORMAL_RCOND * eigenvalues[-1]:
+            raise _IllConditioned
+        self.factor = scipy.linalg.cho_factor(reduced)
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        r_g, r_l = r[: self.n], r[self.n:]
+        rhs = r_g - self.g_l @ (self.l_inverse * r_l)
+        g = np.zeros(self.n)
+        g[self.g_active] = scipy.linalg.cho_solve(self.factor, rhs[self.g_active])
+        log_e = self.l_inverse * (r_l - self.g_l.T @ g)
+        return np.concatenate([g, log_e])
+
+
+def _solve_projected_svd(Z: np.ndarray, B: np.ndarray, smoothing: float,
+                         weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same least-squares problem with ``ln E`` projected out, solved by SVD."""
+    n = weights.size
+    n_samples, n_brackets = Z.shape
+    u = weights[Z]  # (N, P)
+    norm2 = np.sum(u * u, axis=1)
+    share = np.divide(u * u, norm2[:, None], out=np.zeros_like(u), where=norm2[:, None] > 0)
+    rows = np.arange(n_samples * n_brackets).reshape(n_samples, n_brackets)
+    data = np.zeros((n_samples * n_brackets, n))
+    np.add.at(data, (rows, Z), u)
+    # subtract u_ij * sum_k share_ik e_{Z_ik}: the projection of each sample's rows
+    for k in range(n_brackets):
+        np.add.at(data, (rows, np.broadcast_to(Z[:, k:k + 1], Z.shape)),
+                  -u * share[:, k:k + 1])
+    rhs_data = u * (B - np.sum(share * B, axis=1, keepdims=True))
+    gauge = np.zeros((1, n))
+    gauge[0, n // 2] = 1.0
+    inner = np.arange(1, n - 1)
+    smooth = np.zeros((n - 2, n))
+    lam_w = smoothing * weights[inner]
+    smooth[inner - 1, inner - 1] = lam_w
+    smooth[inner - 1, inner] = -2.0 * lam_w
+    smooth[inner - 1, inner + 1] = lam_w
+    matrix = np.vstack([data, gauge, smooth])
+    active = np.any(matrix != 0, axis=0)
+    rhs = np.concatenate([rhs_data.reshape(-1), [0.0], np.zeros(n - 2)])
+    solution, _, _, singular = np.linalg.lstsq(matrix[:, active], rhs, rcond=None)
+    if singular.size == 0 or singular[-1] <= _SVD_RCOND * singular[0]:
+        raise ResponseSolveError(_UNDETERMINED)
+    g = np.zeros(n)
+    g[active] = solution
+    log_e = np.sum(share * (g[Z] - B), axis=1)
+    return g, log_e
+
+
+def g_solve_Debevec1997(Z, log_exposures, smoothing: float = DEFAULT_SMOOTHING,
+                        weights=None, refinement_steps: int = 2
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the tutorial's objective: ``(g, ln_E)`` for one channel.
+
+    Parameters
+    ----------
+    Z
+        ``(N, P)`` code levels of ``N`` samples in ``P`` brackets, integers in ``0 .. n-1``.
+    log_exposures
+        ``ln dt_j``, shape ``(P,)`` (or ``(N, P)`` as ``gsolve.m``'s ``B``).
+    smoothing
+        ``lambda``, the weight of the smoothness rows (50 in the tutorial).
+    weights
+        ``w(z)`` at each of the ``n`` levels (default: the tutorial's hat over 256 codes).
+
+    Returns
+    -------
+    g
+        ``ln f^-1(z)`` at each level, natural log of relative exposure, ``g(n // 2) = 0``.
+    ln_E
+        Natural log of the relative irradiance of each sample.
+
+    Raises
+    ------
+    ResponseSolveError
+        If the samples leave the response undetermined.
+    """
+    if weights is None:
+        from hdrio.merge.weighting import weighting_tutorial_hat
+
+        weights = weighting_tutorial_hat(np.arange(256), 0, 255)
+    weights = np.asarray(weights, dtype=np.float64)
+    n = weights.size
+    A, b = debevec1997_system(Z, log_exposures, smoothing, weights)
+    try:
+        solver = _ReducedNormalSolver(A, n)
+    except _IllConditioned:
+        Z = np.asarray(Z, dtype=np.int64)
+        B = np.broadcast_to(np.asarray(log_exposures, dtype=np.float64), Z.shape)
+        return _solve_projected_svd(Z, B, smoothing, weights)
+    x = solver.solve(A.T @ b)
+    for _ in range(refinement_steps):
+        x += solver.solve(A.T @ (b - A @ x))
+    return x[:n], x[n:]
+
+
+def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
+                         weighting: str = "Debevec1997", sampling: str = "stratified",
+                         samples: int | None = None, exclude: np.ndarray | None = None,
+                         seed: int = 0, levels: int | None = None, monotone: bool = True):
+    """Recover a :class:`~hdrio.response.curve.CameraResponse` from an exposure stack.
+
+    Parameters
+    ----------
+    stack
+        An :class:`~hdrio.stack.ExposureStack`.
+    smoothing
+        ``lambda`` (50 by default, as the tutorial).
+    weighting
+        A name in :data:`hdrio.merge.weighting.WEIGHTING_METHODS`.
+    sampling, samples, exclude, seed
+        Pixel selection (see :mod:`hdrio.response.sampling`); ``exclude`` is an
+        ``(H, W)`` mask of pixels never to sample.
+    levels
+        Code levels solved for. Default: every code for 8-bit (256); 1024 bins for
+        16-bit, since a 65536-unknown system would be slow and no better constrained.
+        The solved table is interpolated back to every code.
+    monotone
+        Make each channel's ``g`` non-decreasing (a real response cannot fall).
+
+    Channels whose samples are identical (greyscale stored as RGB) are solved once.
+    """
+    from hdrio.merge.weighting import weights_table
+    from hdrio.response.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
+    from hdrio.response.sampling import DEFAULT_SAMPLES, SAMPLING_METHODS, sample_codes
+
+    code_max = stack.code_max
+    levels = levels or (code_max + 1 if code_max < 1024 else 1024)
+    sampler = SAMPLING_METHODS[sampling]
+    indices = sampler(stack.codes, code_max, n_samples=samples or DEFAULT_SAMPLES,
+                      exclude=exclude, seed=seed, n_levels=levels)
+    if indices.size == 0:
+        raise ResponseSolveError(
+            "no usable samples: every pixel is clipped (0 or saturated) in all but at most "
+            "one bracket, or excluded"
+        )
+    Z = sample_codes(stack.codes, indices)
+    if levels != code_max + 1:
+        Z = np.rint(Z.astype(np.float64) * ((levels - 1) / code_max)).astype(np.int64)
+    weights = weights_table(weighting, code_max, levels)
+    anchor = levels // 2
+    tables, supported, solved = [], [], {}
+    for c in range(Z.shape[2]):
+        key = Z[:, :, c].tobytes()
+        if key not in solved:
+            g, _ = g_solve_Debevec1997(Z[:, :, c], stack.log_exposures, smoothing, weights)
+            touched = np.bincount(Z[:, :, c].reshape(-1),
+                                  weights=weights[Z[:, :, c]].reshape(-1), minlength=levels) > 0
+            determined = _determined_levels(weights, touched)
+            g = fill_unsupported(g, determined)
+            if monotone:
+                g = monotone_non_decreasing(g, anchor)
+            solved[key] = (g, touched)
+        g, touched = solved[key]
+        tables.append(g)
+        supported.append(touched)
+    g_levels = np.stack(tables, axis=1)
+    support_levels = np.stack(supported, axis=1)
+    if levels != code_max + 1:
+        position = np.arange(code_max + 1) * ((levels - 1) / code_max)
+        g_full = np.stack([np.interp(position, np.arange(levels), g_levels[:, c])
+                           for c in range(g_levels.shape[1])], axis=1)
+        support_full = support_levels[np.rint(position).astype(np.int64)]
+    else:
+        g_full, support_full = g_levels, support_levels
+    return CameraResponse(
+        log_inverse=g_full, code_max=code_max, supported=support_full,
+        method="Debevec1997",
+        parameters={"smoothing": float(smoothing), "weighting": weighting,
+                    "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
+                    "monotone": bool(monotone), "sample_indices": indices},
+    )
+
+
+def _determined_levels(weights: np.ndarray, touched: np.ndarray) -> np.ndarray:
+    """Levels some equation reaches: a weighted data row, or an active smoothness row."""
+    reached = touched.copy()
+    active = np.flatnonzero(weights[1:-1] > 0) + 1
+    for offset in (-1, 0, 1):
+        reached[active + offset] = True
+    return reached

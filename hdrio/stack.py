@@ -1,0 +1,116 @@
+"""``ExposureStack``: bracket code values, their exposures and where each came from."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hdrio.errors import InputError
+
+
+@dataclass(frozen=True)
+class ExposureStack:
+    """A validated set of brackets of one scene, sorted by increasing exposure.
+
+    Attributes
+    ----------
+    codes
+        Stored code values, shape ``(P, H, W, C)``, dtype ``uint8`` or ``uint16``; never
+        colour-converted on read.
+    exposures
+        Relative exposure of each bracket, shape ``(P,)``: seconds of exposure time, or
+        ``t * ISO/100 / N**2`` when aperture or ISO vary across the set (see
+        :mod:`hdrio.io.exposure`).
+    files
+        Source of each bracket (a path, or a label for synthetic stacks).
+    exposure_sources
+        How each exposure was found: ``explicit``, ``sidecar``, ``exif`` or ``filename``.
+    code_max
+        Largest code value of the encoding (255 for 8-bit, 65535 for 16-bit): the
+        saturation level.
+    """
+
+    codes: np.ndarray
+    exposures: np.ndarray
+    files: tuple[str, ...]
+    exposure_sources: tuple[str, ...]
+    code_max: int
+    metadata: tuple[dict, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        validate_stack(self)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        codes: np.ndarray,
+        exposures,
+        files=None,
+        code_max: int | None = None,
+        exposure_sources=None,
+        metadata=None,
+    ) -> ExposureStack:
+        """Build a stack from arrays in any order; it is sorted by exposure."""
+        codes = np.asarray(codes)
+        if codes.ndim == 3:
+            codes = codes[..., np.newaxis]
+        exposures = np.asarray(exposures, dtype=np.float64).reshape(-1)
+        count = codes.shape[0]
+        files = tuple(files) if files is not None else tuple(f"bracket{j}" for j in range(count))
+        sources = (
+            tuple(exposure_sources) if exposure_sources is not None else ("explicit",) * count
+        )
+        metadata = tuple(metadata) if metadata is not None else tuple({} for _ in range(count))
+        if code_max is None:
+            code_max = int(np.iinfo(codes.dtype).max) if codes.dtype.kind == "u" else 255
+        if not (len(files) == len(sources) == len(metadata) == count == exposures.size):
+            raise ValueError(
+                f"{count} images but {exposures.size} exposures, {len(files)} file names"
+            )
+        order = np.argsort(exposures, kind="stable")
+        return cls(
+            codes=codes[order],
+            exposures=exposures[order],
+            files=tuple(files[j] for j in order),
+            exposure_sources=tuple(sources[j] for j in order),
+            code_max=int(code_max),
+            metadata=tuple(metadata[j] for j in order),
+        )
+
+    @property
+    def count(self) -> int:
+        return int(self.codes.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(height, width, channels)`` of every bracket."""
+        return tuple(int(n) for n in self.codes.shape[1:])  # type: ignore[return-value]
+
+    @property
+    def log_exposures(self) -> np.ndarray:
+        return np.log(self.exposures)
+
+
+def validate_stack(stack: ExposureStack) -> None:
+    """Raise :class:`InputError` naming the file at fault if the stack is unusable."""
+    codes, exposures, files = stack.codes, stack.exposures, stack.files
+    if codes.ndim != 4:
+        raise ValueError(f"codes must have shape (P, H, W, C); got {codes.shape}")
+    if codes.dtype.kind not in "ui":
+        raise InputError(files[0], f"code values must be integers, got {codes.dtype}")
+    if len(files) < 2:
+        name = files[0] if files else "<no input>"
+        raise InputError(name, "at least 2 bracketed exposures are needed; got 1")
+    for name, value in zip(files, exposures):
+        if not np.isfinite(value) or value <= 0:
+            raise InputError(name, f"exposure must be a positive number, got {value!r}")
+    if np.any(np.diff(exposures) <= 0):
+        j = int(np.flatnonzero(np.diff(exposures) <= 0)[0])
+        raise InputError(
+            files[j + 1],
+            f"same exposure ({exposures[j]:g}) as {files[j]}: every bracket needs its own "
+            "exposure",
+        )
+    if codes.min() < 0 or codes.max() > stack.code_max:
+        raise InputError(files[0], f"code values outside 0..{stack.code_max}")
