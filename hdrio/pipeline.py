@@ -114,7 +114,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:units": "relative",
         "hdrio:exposureScale": float(result.exposure_scale),
         "hdrio:sourceFiles": [str(name) for name in stack.files],
-        "hdrio:exposures": [float(t) for t in stack.exposures],
+        # Exact decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
+        "hdrio:exposures": [repr(float(t)) for t in stack.exposures],
         "hdrio:exposureSource": stack.exposure_sources[0],
         "hdrio:codeMax": int(stack.code_max),
         "hdrio:responseMethod": response.method,
@@ -123,10 +124,13 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:lambda": float(options.smoothing),
         "hdrio:sampling": options.sampling,
         "hdrio:samples": int(response.parameters.get("samples", 0)),
+        "hdrio:seed": int(options.seed),
         "hdrio:mergeDomain": options.merge,
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    if options.exclude_colour is not None:
+        attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
     names = "RGB" if response.channels == 3 else "Y"
     for c, name in enumerate(names[: response.channels]):
         attributes[f"hdrio:response{name}"] = [float(v) for v in curves[:, c]]

@@ -61,12 +61,13 @@ def demo_scene(height: int = 400, width: int = 600, seed: int = 0) -> np.ndarray
 
 
 def render_brackets(radiance: np.ndarray, exposures, response: Response = gamma_response,
-                    bit_depth: int = 8, shot_noise: float = 1e-4, read_noise: float = 5e-4,
+                    bit_depth: int = 8, shot_noise: float = 3e-5, read_noise: float = 2e-4,
                     seed: int = 0) -> np.ndarray:
     """Render code values ``(P, H, W, C)`` of ``radiance`` for each exposure time.
 
     Sensor exposure ``X = E * t`` saturates at 1; noise is Gaussian with variance
-    ``shot_noise * X + read_noise^2`` (photon and read noise, relative to full well);
+    ``shot_noise * X + read_noise^2`` (photon and read noise, relative to full well; the
+    defaults are a full well of about 33,000 electrons with 6.6 electrons of read noise);
     then the response ``f`` maps [0, 1] to [0, 1] and codes are quantised to
     ``bit_depth`` bits.
     """

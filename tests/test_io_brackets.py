@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import OpenEXR  # the test extra: proves our EXRs are readable by OpenEXR itself
 import OpenImageIO as oiio
 import pytest
 
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_brackets, read_codes
 from hdrio.io.write import HALF_MAX, HALF_MIN_POSITIVE, OutputError, write_exr, write_image
-
-OpenEXR = pytest.importorskip("OpenEXR", reason="OpenEXR's Python bindings (extra 'test')")
 
 FROBISHER = ("IMG_2600.jpg", "IMG_2601.jpg", "IMG_2602.jpg")  # 1/8 s, 1 s, 8 s in EXIF
 
@@ -325,13 +324,6 @@ def test_opaque_alpha_is_dropped_and_grey_is_kept(tmp_path):
     assert np.array_equal(codes, grey)  # exact
 
 
-@pytest.mark.xfail(
-    reason="hdrio/io/brackets.py read_codes opens images without the OpenImageIO config "
-           "'oiio:UnassociatedAlpha'=1, so a PNG with alpha < 255 has its RGB codes "
-           "premultiplied by alpha (255 at alpha 128 reads as 128)",
-    raises=AssertionError,
-    strict=True,
-)
 def test_rgb_codes_of_a_png_with_translucent_alpha_are_the_stored_values(tmp_path):
     rgba = np.random.default_rng(1).integers(0, 256, size=(8, 8, 4), dtype=np.uint8)
     rgba[..., 3] = 128
@@ -397,26 +389,22 @@ def test_exr_attributes_round_trip_through_openexr_and_openimageio(tmp_path, pix
             assert stored == pytest.approx(ATTRIBUTES[name], rel=1e-7), (reader, name)
 
 
-@pytest.mark.parametrize(
-    "count",
-    [1, 2, 3, 5, 8,
-     pytest.param(9, marks=pytest.mark.xfail(
-         reason="hdrio/io/write.py _type_of declares float lists as TypeDesc 'float[9]', "
-                "which OpenImageIO's EXR writer stores as an m33f matrix",
-         raises=AssertionError, strict=True)),
-     pytest.param(16, marks=pytest.mark.xfail(
-         reason="hdrio/io/write.py _type_of declares float lists as TypeDesc 'float[16]', "
-                "which OpenImageIO's EXR writer stores as an m44f matrix (e.g. "
-                "hdrio:exposures of the 16-frame Memorial stack)",
-         raises=AssertionError, strict=True)),
-     17, 256],
-)
+@pytest.mark.parametrize("count", [1, 5, 8, 17, 256])
 def test_exr_float_list_of_any_length_stays_a_flat_list(tmp_path, count):
     values = [0.5 + j for j in range(count)]
     path = write_exr(tmp_path / "list.exr", np.ones((2, 2, 3), np.float32), {"v": values})
     stored = np.asarray(openexr_header(path)["v"], dtype=np.float64)
     assert stored.shape == (count,)
     assert stored.tolist() == values  # exact: halves of small integers fit float32
+
+
+@pytest.mark.parametrize("count", [2, 3, 9, 16])
+def test_exr_float_lists_that_would_become_vectors_or_matrices_are_refused(tmp_path, count):
+    # OpenImageIO stores float[2|3|9|16] as v2f/v3f/m33f/m44f: refuse rather than mislabel.
+    with pytest.raises(TypeError, match="vector or matrix"):
+        write_exr(tmp_path / "list.exr", np.ones((2, 2, 3), np.float32),
+                  {"v": [0.5] * count})
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_exr_int_bool_and_numpy_scalars(tmp_path):
@@ -427,24 +415,12 @@ def test_exr_int_bool_and_numpy_scalars(tmp_path):
     assert header["x"] == pytest.approx(0.1, rel=1e-7)  # float32 storage
 
 
-INT_LIST_DROPPED = pytest.mark.xfail(
-    reason="hdrio/io/write.py _type_of declares int lists as TypeDesc 'int[n]'; OpenEXR "
-           "has only v2i/v3i, so OpenImageIO silently drops the attribute for any other "
-           "length",
-    raises=KeyError,
-    strict=True,
-)
-
-
-@pytest.mark.parametrize(
-    "count",
-    [pytest.param(1, marks=INT_LIST_DROPPED), 2, 3,
-     pytest.param(4, marks=INT_LIST_DROPPED), pytest.param(6, marks=INT_LIST_DROPPED)],
-)
-def test_exr_int_list_is_stored(tmp_path, count):
-    values = list(range(1, count + 1))
-    path = write_exr(tmp_path / "ints.exr", np.ones((2, 2, 3), np.float32), {"ints": values})
-    assert np.asarray(openexr_header(path)["ints"]).tolist() == values  # exact: integers
+@pytest.mark.parametrize("count", [1, 2, 4])
+def test_exr_int_lists_are_refused_not_dropped(tmp_path, count):
+    # OpenEXR has only v2i/v3i; OpenImageIO silently drops other int lists, so refuse them.
+    with pytest.raises(TypeError, match="integer lists"):
+        write_exr(tmp_path / "ints.exr", np.ones((2, 2, 3), np.float32),
+                  {"ints": list(range(count))})
 
 
 def test_exr_pixels_and_compression(tmp_path):

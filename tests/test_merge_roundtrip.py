@@ -102,5 +102,34 @@ def test_memorial_merge_and_opencv_reference(shared_data, tmp_path):
     for c in range(3):
         scale = np.exp(np.median(np.log(reference[well, c] / ours[well, c])))
         relative = np.abs(scale * ours[well, c] - reference[well, c]) / reference[well, c]
-        # Median within OpenCV's 10 %; the maximum is 35-42 % today (issue #2 stays open).
+        # Median within OpenCV's 10 % (measured 4.2-5.6 %). The pointwise maximum is 35-42 %:
+        # the stored curve (70 samples, lambda 10) wiggles by +-0.3 stops between codes and
+        # OpenCV 5's own CalibrateDebevec misses it by 26-63 % (docs/method.md).
         assert np.median(relative) <= 0.10, (c, np.median(relative), relative.max())
+
+
+def test_solver_reproduces_opencv_calibrate_debevec_on_its_samples(shared_data):
+    # Same samples (OpenCV's default grid of 70 points), same settings (lambda 10, the
+    # never-zero hat = OpenCV's triangleWeights): hdrio's solve must agree with
+    # cv2.createCalibrateDebevec run here, within OpenCV's own test tolerance of 10 %
+    # over the well-exposed codes 20-235 (measured 1.7-7.0 %; OpenCV solves in float32).
+    cv2 = pytest.importorskip("cv2", reason="OpenCV is a benchmark extra: pip install .[bench]")
+    from hdrio.merge.weighting import weighting_tutorial_hat
+    from hdrio.response.debevec1997 import g_solve_Debevec1997
+
+    folder = shared_data("memorial_debevec")
+    images = [cv2.imread(f) for f in sorted(glob.glob(str(folder / "memorial00*.png")))]
+    times = np.array([32 / 2**k for k in range(16)], np.float32)
+    expected = cv2.createCalibrateDebevec().process(images, times).reshape(256, 3)
+    height, width = images[0].shape[:2]
+    x_points = int(np.sqrt(70 * width / height))
+    step_x, step_y = width // x_points, height // (70 // x_points)
+    points = [(x, y) for x in range(step_x // 2, step_x // 2 + step_x * x_points, step_x)
+              for y in range(step_y // 2, step_y // 2 + step_y * (70 // x_points), step_y)]
+    weights = weighting_tutorial_hat(np.arange(256))
+    well = slice(20, 236)
+    for c in range(3):  # OpenCV's B, G, R
+        Z = np.array([[image[y, x, c] for image in images] for x, y in points])
+        g, _ = g_solve_Debevec1997(Z, np.log(times.astype(np.float64)), 10.0, weights)
+        relative = np.abs(np.exp(g[well]) - expected[well, c]) / expected[well, c]
+        assert relative.max() <= 0.10, (c, relative.max())

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import MERGE_METHODS
@@ -93,6 +95,8 @@ def _check_outputs(output: Path, preview: Path | None, inputs: list[str]) -> Non
             continue
         if path.suffix.lower() not in allowed:
             raise HdrioError(f"{path}: unsupported output type; use {', '.join(sorted(allowed))}")
+        if path.is_dir():
+            raise HdrioError(f"{path}: is a folder, not a file name")
         if not path.parent.is_dir():
             raise HdrioError(f"{path}: folder {path.parent} does not exist")
         if any(Path(i).resolve() == path.resolve() for i in inputs):
@@ -156,6 +160,8 @@ def add_info(sub) -> None:
 
 
 def _format_value(value, full: bool) -> str:
+    if isinstance(value, np.ndarray):
+        value = value.reshape(-1).tolist()
     if isinstance(value, tuple | list) and len(value) > 8 and not full:
         head = ", ".join(_short(v) for v in value[:3])
         tail = ", ".join(_short(v) for v in value[-2:])

@@ -61,7 +61,10 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
     if not path.is_file():
         raise InputError(path, "no such file")
     with _quiet_native_stderr():
-        image = oiio.ImageInput.open(str(path))
+        # Keep stored values: never let a reader premultiply RGB by a translucent alpha.
+        config = oiio.ImageSpec()
+        config.attribute("oiio:UnassociatedAlpha", 1)
+        image = oiio.ImageInput.open(str(path), config)
         if image is None:
             raise InputError(path, f"cannot read image ({_first_line(oiio.geterror())})")
         try:

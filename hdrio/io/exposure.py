@@ -30,13 +30,10 @@ _INTEGER = re.compile(r"\d+")
 
 def parse_exposure(text: str | float) -> float:
     """Parse ``"1/60"``, ``"0.5"``, ``"30"`` or a number into seconds (a positive float)."""
-    if isinstance(text, int | float):
-        value = float(text)
-    else:
-        try:
-            value = float(Fraction(text.strip()))
-        except (ValueError, ZeroDivisionError):
-            raise ValueError(f"not an exposure time: {text!r}") from None
+    try:
+        value = float(text) if isinstance(text, int | float) else float(Fraction(text.strip()))
+    except (ValueError, ZeroDivisionError, OverflowError):
+        raise ValueError(f"not an exposure time: {text!r}") from None
     if not value > 0 or value == float("inf"):
         raise ValueError(f"exposure time must be positive and finite: {text!r}")
     return value
@@ -70,35 +67,39 @@ def read_exposure_table(path: str | Path) -> dict[str, float]:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as error:
         raise InputError(path, f"cannot read exposure list ({error.strerror})") from None
-    lines = [line for line in text.splitlines() if line.strip()]
+    # (line number, content) of the lines that carry data: comments and blanks dropped,
+    # numbering kept, so errors point at the line a user sees in an editor.
+    lines = [(number, line.split("#", 1)[0].strip())
+             for number, line in enumerate(text.splitlines(), start=1)]
+    lines = [(number, line) for number, line in lines if line]
     if not lines:
         raise InputError(path, "exposure list is empty")
-    if "," in lines[0]:
-        return _read_csv_table(path, text)
+    if "," in lines[0][1]:
+        return _read_csv_table(path, lines)
     return _read_opencv_list(path, lines)
 
 
-def _read_csv_table(path: Path, text: str) -> dict[str, float]:
-    rows = csv.DictReader(line for line in text.splitlines() if not line.startswith("#"))
-    fields = {name.strip().lower(): name for name in rows.fieldnames or []}
+def _read_csv_table(path: Path, lines: Sequence[tuple[int, str]]) -> dict[str, float]:
+    header, *rows = lines
+    fields = [name.strip().lower() for name in next(csv.reader([header[1]]))]
     if "file" not in fields or "exposure_time_s" not in fields:
         raise InputError(path, "CSV exposure list needs the columns 'file' and 'exposure_time_s'")
+    file_column, time_column = fields.index("file"), fields.index("exposure_time_s")
     table: dict[str, float] = {}
-    for number, row in enumerate(rows, start=2):
-        name = (row[fields["file"]] or "").strip()
+    for number, line in rows:
+        values = next(csv.reader([line]))
         try:
-            table[name] = parse_exposure(row[fields["exposure_time_s"]] or "")
-        except ValueError as error:
-            raise InputError(path, f"line {number}: {error}") from None
+            name = values[file_column].strip()
+            table[name] = parse_exposure(values[time_column])
+        except (ValueError, IndexError) as error:
+            problem = error if isinstance(error, ValueError) else "missing columns"
+            raise InputError(path, f"line {number}: {problem}") from None
     return table
 
 
-def _read_opencv_list(path: Path, lines: Sequence[str]) -> dict[str, float]:
+def _read_opencv_list(path: Path, lines: Sequence[tuple[int, str]]) -> dict[str, float]:
     table: dict[str, float] = {}
-    for number, line in enumerate(lines, start=1):
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
+    for number, line in lines:
         parts = line.split()
         if len(parts) != 2:
             raise InputError(path, f"line {number}: expected 'file 1/t', got {line!r}")

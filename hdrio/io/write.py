@@ -17,6 +17,7 @@ from hdrio.errors import HdrioError
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
+_AGGREGATE_LENGTHS = (2, 3, 9, 16)
 
 
 class OutputError(HdrioError):
@@ -28,6 +29,8 @@ def _type_of(value) -> tuple[str, object]:
     if isinstance(value, bool):
         return "int", int(value)
     if isinstance(value, int | np.integer):
+        if not -(2**31) <= int(value) < 2**31:
+            raise TypeError(f"integer {value} does not fit an EXR int attribute")
         return "int", int(value)
     if isinstance(value, float | np.floating):
         return "float", float(value)
@@ -38,7 +41,12 @@ def _type_of(value) -> tuple[str, object]:
         if all(isinstance(item, str) for item in items):
             return f"string[{len(items)}]", tuple(items)
         if all(isinstance(item, int | np.integer) for item in items):
-            return f"int[{len(items)}]", tuple(int(item) for item in items)
+            # OpenImageIO's EXR writer keeps int lists only as 2- or 3-vectors.
+            raise TypeError("integer lists have no EXR attribute type; store floats or text")
+        if len(items) in _AGGREGATE_LENGTHS:
+            # float[2|3|9|16] would become v2f/v3f/m33f/m44f, not a list.
+            raise TypeError(f"a list of {len(items)} floats would be stored as a vector or "
+                            "matrix; store it as text")
         return f"float[{len(items)}]", tuple(float(item) for item in items)
     raise TypeError(f"cannot store attribute value {value!r}")
 

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from hdrio.errors import ResponseSolveError
 
 DEFAULT_SMOOTHING = 50.0
-_NORMAL_RCOND = 1e-12  # below this eigenvalue ratio, the normal equations lose digits
+_NORMAL_RCOND = 1e-12  # below this reciprocal condition, the normal equations lose digits
 _SVD_RCOND = 1e-13  # below this singular value ratio, the response is undetermined
 _UNDETERMINED = (
     "the samples do not determine the camera response (the brackets show too little "
@@ -95,10 +95,15 @@ class _ReducedNormalSolver:
         schur = g_g - (self.g_l @ sp.diags(self.l_inverse) @ self.g_l.T).toarray()
         self.g_active = np.diag(g_g) > 0
         reduced = schur[np.ix_(self.g_active, self.g_active)]
-        eigenvalues = np.linalg.eigvalsh(reduced)
-        if eigenvalues[0] <= _NORMAL_RCOND * eigenvalues[-1]:
+        try:
+            self.factor = scipy.linalg.cho_factor(reduced)
+        except np.linalg.LinAlgError:
+            raise _IllConditioned from None
+        # LAPACK's 1-norm reciprocal condition estimate from the Cholesky factor, O(n^2).
+        rcond, info = scipy.linalg.lapack.dpocon(self.factor[0], np.abs(reduced).sum(0).max(),
+                                                 uplo="L" if self.factor[1] else "U")
+        if info != 0 or rcond <= _NORMAL_RCOND:
             raise _IllConditioned
-        self.factor = scipy.linalg.cho_factor(reduced)
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         r_g, r_l = r[: self.n], r[self.n:]

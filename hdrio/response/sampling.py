@@ -72,12 +72,13 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     per_bin = max(1, math.ceil(n_samples / (count * _BINS)))
     chosen: list[np.ndarray] = []
     for j in range(count):
-        usable = unclipped[j, candidates]
-        for b in range(_BINS):
-            members = np.flatnonzero(usable & (bins[j] == b))
-            if members.size:
-                chosen.append(rng.choice(members, size=min(per_bin, members.size),
-                                         replace=False))
+        members = np.flatnonzero(unclipped[j, candidates])
+        members = members[rng.permutation(members.size)]
+        order = members[np.argsort(bins[j, members], kind="stable")]
+        sorted_bins = bins[j, order]
+        first_of_bin = np.searchsorted(sorted_bins, sorted_bins, side="left")
+        rank_in_bin = np.arange(order.size) - first_of_bin
+        chosen.append(order[rank_in_bin < per_bin])
     picked = np.unique(np.concatenate(chosen)) if chosen else np.empty(0, np.int64)
     if picked.size > n_samples:
         picked = np.sort(rng.choice(picked, size=n_samples, replace=False))
