@@ -92,8 +92,15 @@ def test_memorial_merge_and_opencv_reference(shared_data, tmp_path):
                  "--exposures-from", str(folder / "exposures.csv"),
                  "--exclude-color", "0,0,255", "-o", str(output)])
     assert code == 0
+    import OpenEXR
+
+    exr = OpenEXR.File(str(output))  # OpenEXR's own reader, beside OpenImageIO's below
+    assert exr.channels()["RGB"].pixels.shape == (768, 512, 3)
+    assert len(exr.header()["chromaticities"]) == 8
+    assert len(exr.header()["hdrio:responseG"]) == 256
     header = read_header(output)
     assert len(header["chromaticities"]) == 8 and header["hdrio:exposureSource"] == "sidecar"
+    assert len(header["hdrio:sourceFiles"]) == 16
     ours = np.exp(np.stack([header[f"hdrio:response{c}"] for c in "RGB"], axis=1))
     reference = np.loadtxt(folder / "reference" / "opencv_extra_calibrate_debevec.csv",
                            delimiter=",")[:, ::-1]  # stored B, G, R

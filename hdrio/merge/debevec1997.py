@@ -72,7 +72,9 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     if response.log_inverse.shape[1] != channels:
         raise ValueError(f"response has {response.log_inverse.shape[1]} channels, "
                          f"brackets have {channels}")
-    weights = weights_table(weighting, stack.code_max)
+    # Per channel: codes where g is extrapolated (no weighted sample fell there) say little
+    # about radiance, so they get no weight; the fallbacks below still cover every pixel.
+    weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
     tables = [_estimate_tables(response, t, domain) for t in stack.exposures]
     channel_index = np.arange(channels)
     radiance = np.empty((height, width, channels), dtype=np.float32)
@@ -90,7 +92,7 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
             dropped |= np.any(codes == stack.code_max, axis=-1)
             keep = ~dropped[..., np.newaxis]
             estimate = tables[j][codes, channel_index]
-            weight = np.where(keep, weights[codes], 0.0)
+            weight = np.where(keep, weights[codes, channel_index], 0.0)
             numerator += weight * estimate
             denominator += weight
             fallback = estimate if fallback is None else np.where(keep, estimate, fallback)
