@@ -8,6 +8,8 @@ import numpy as np
 
 from hdrio.errors import InputError
 
+MIN_EXPOSURE_STEP = 0.01  # neighbouring exposures must differ by at least 1 %
+
 
 @dataclass(frozen=True)
 class ExposureStack:
@@ -105,12 +107,15 @@ def validate_stack(stack: ExposureStack) -> None:
     for name, value in zip(files, exposures):
         if not np.isfinite(value) or value <= 0:
             raise InputError(name, f"exposure must be a positive number, got {value!r}")
-    if np.any(np.diff(exposures) <= 0):
-        j = int(np.flatnonzero(np.diff(exposures) <= 0)[0])
+    # Cameras step exposure in thirds of a stop; brackets closer than 1 % are the same
+    # exposure, and differ only by noise, which says nothing about the response.
+    close = exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
+    if np.any(close):
+        j = int(np.flatnonzero(close)[0])
         raise InputError(
             files[j + 1],
-            f"same exposure ({exposures[j]:g}) as {files[j]}: every bracket needs its own "
-            "exposure",
+            f"same exposure ({exposures[j + 1]:g}) as {files[j]} ({exposures[j]:g}): every "
+            "bracket needs its own exposure",
         )
     if codes.min() < 0 or codes.max() > stack.code_max:
         raise InputError(files[0], f"code values outside 0..{stack.code_max}")

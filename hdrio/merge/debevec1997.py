@@ -32,6 +32,9 @@ from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
 _BLOCK_PIXELS = 1 << 20
+_FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+_LOG_FLOAT32_MAX = float(np.log(_FLOAT32_MAX))
 
 
 @dataclass(frozen=True)
@@ -103,9 +106,8 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
         with np.errstate(invalid="ignore", divide="ignore"):
             merged = np.where(denominator > 0, numerator / denominator, fallback)
         if domain == "log":
-            merged = np.exp(merged)
-        radiance[top: top + rows_per_block] = merged
-    np.clip(radiance, np.finfo(np.float32).tiny, np.finfo(np.float32).max, out=radiance)
+            merged = np.exp(np.minimum(merged, _LOG_FLOAT32_MAX))
+        radiance[top: top + rows_per_block] = np.clip(merged, _FLOAT32_TINY, _FLOAT32_MAX)
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=clipped, black_everywhere=black,
         used_per_bracket=tuple(int(u) for u in used),

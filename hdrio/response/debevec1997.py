@@ -208,7 +208,10 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
     stack
         An :class:`~hdrio.stack.ExposureStack`.
     smoothing
-        ``lambda`` (50 by default, as the tutorial).
+        ``lambda`` (50 by default, as the tutorial), stated for 256 levels. With ``n``
+        levels the smoothness rows are weighted by ``lambda (n / 256)^1.5``: second
+        differences shrink as ``(256 / n)^2`` and their count grows as ``n / 256``, so
+        this keeps the smoothing of a given curve independent of the level count.
     weighting
         A name in :data:`hdrio.merge.weighting.WEIGHTING_METHODS`.
     sampling, samples, exclude, seed
@@ -242,13 +245,16 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
         Z = np.rint(Z.astype(np.float64) * ((levels - 1) / code_max)).astype(np.int64)
     weights = weights_table(weighting, code_max, levels)
     anchor = levels // 2
+    level_smoothing = smoothing * (levels / 256) ** 1.5
     tables, supported, solved = [], [], {}
     for c in range(Z.shape[2]):
         key = Z[:, :, c].tobytes()
         if key not in solved:
-            g, _ = g_solve_Debevec1997(Z[:, :, c], stack.log_exposures, smoothing, weights)
             touched = np.bincount(Z[:, :, c].reshape(-1),
                                   weights=weights[Z[:, :, c]].reshape(-1), minlength=levels) > 0
+            _check_coverage(touched)
+            g, _ = g_solve_Debevec1997(Z[:, :, c], stack.log_exposures, level_smoothing,
+                                       weights)
             determined = _determined_levels(weights, touched)
             g = fill_unsupported(g, determined)
             if monotone:
@@ -269,10 +275,32 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
     return CameraResponse(
         log_inverse=g_full, code_max=code_max, supported=support_full,
         method="Debevec1997",
-        parameters={"smoothing": float(smoothing), "weighting": weighting,
+        parameters={"smoothing": float(smoothing), "level_smoothing": float(level_smoothing),
+                    "weighting": weighting,
                     "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
                     "monotone": bool(monotone), "sample_indices": indices},
     )
+
+
+MIN_SUPPORTED_LEVELS = 16
+MAX_GAP_FRACTION = 1 / 2
+
+
+def _check_coverage(touched: np.ndarray) -> None:
+    """Refuse samples that pin g at only a few tones (a grey card, a single pixel).
+
+    Debevec's solve needs the samples to chain the code range together; with a handful
+    of tones (under 16 levels), or a gap of half the range between data, the smoothness
+    term alone would invent the curve between them.
+    """
+    levels = np.flatnonzero(touched)
+    gap = int(np.max(np.diff(levels))) if levels.size > 1 else touched.size
+    if levels.size < MIN_SUPPORTED_LEVELS or gap > MAX_GAP_FRACTION * touched.size:
+        raise ResponseSolveError(
+            f"the samples show too few distinct tones to recover a response ({levels.size} "
+            f"code levels, largest gap {gap} of {touched.size}): shoot a scene with more "
+            "tonal variety or more brackets, or use a saved response"
+        )
 
 
 def _determined_levels(weights: np.ndarray, touched: np.ndarray) -> np.ndarray:
