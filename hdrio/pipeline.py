@@ -132,8 +132,12 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
     names = "RGB" if response.channels == 3 else "Y"
+    supported = []
     for c, name in enumerate(names[: response.channels]):
         attributes[f"hdrio:response{name}"] = [float(v) for v in curves[:, c]]
+        codes = np.flatnonzero(response.supported[:, c])
+        supported.append(f"{name} {codes[0]}-{codes[-1]}" if codes.size else f"{name} none")
+    attributes["hdrio:responseSupport"] = ", ".join(supported)
     return attributes
 
 

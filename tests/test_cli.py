@@ -90,6 +90,8 @@ def test_merge_writes_exr_and_preview_then_info_shows_provenance(brackets, out_d
     assert re.search(r"^  hdrio:lambda\s+50$", out, re.MULTILINE)
     assert re.search(r"^  hdrio:exposureSource\s+filename$", out, re.MULTILINE)
     assert re.search(r"^  hdrio:responseR\s+\[256 values: ", out, re.MULTILINE)
+    assert re.search(r"^  hdrio:responseSupport\s+R \d+-\d+, G \d+-\d+, B \d+-\d+$", out,
+                     re.MULTILINE)
 
     header = OpenEXR.File(str(exr)).header()
     assert header["hdrio:lambda"] == 50.0  # exact: 50 is a float32
