@@ -1,0 +1,1 @@
+"""Benchmarks for hdrio (not part of the installed package; run from the repository root)."""

@@ -1,0 +1,181 @@
+"""The methods compared: hdrio variants, OpenCV and colour-hdri, run on identical stacks.
+
+Every method takes a rendered :class:`~benchmarks.truth.stacks.Stack` (RGB codes, times
+in seconds) and returns radiance ``(H, W, 3)`` RGB plus the recovered inverse response
+as ``ln f^-1`` per code ``(levels, 3)`` RGB. Peers are imported lazily; a missing one is
+skipped with a note. OpenCV's and colour-hdri's Debevec implementations take 8-bit
+input only (256-entry responses), so they run on 8-bit stacks only.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from benchmarks.truth.stacks import Stack
+from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.response.curve import CameraResponse
+from hdrio.stack import ExposureStack
+
+
+@dataclass(frozen=True)
+class MethodOutput:
+    """``radiance`` RGB ``(H, W, 3)`` (any positive scale) and ``log_inverse`` ``(L, 3)``."""
+
+    radiance: np.ndarray
+    log_inverse: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Method:
+    """A named way of turning a stack into radiance.
+
+    Attributes
+    ----------
+    name
+        Label in the reports.
+    kind
+        ``hdrio``, ``peer`` or ``reference`` (the oracle: not a competitor).
+    run
+        The call that is timed and whose memory is measured.
+    bits
+        Bit depths the method accepts.
+    requires
+        Module that must be importable, or ``None``.
+    description
+        One line for the report.
+    """
+
+    name: str
+    kind: str
+    run: Callable[[Stack], MethodOutput]
+    bits: tuple[int, ...] = (8, 16)
+    requires: str | None = None
+    description: str = ""
+    settings: dict = field(default_factory=dict)
+
+    def missing(self) -> str | None:
+        """Why the method cannot run here (its module is not installed), else ``None``."""
+        if self.requires and importlib.util.find_spec(self.requires) is None:
+            return f"{self.requires} is not installed (pip install .[bench])"
+        return None
+
+    def supports(self, stack: Stack) -> bool:
+        """Whether the method accepts the stack's bit depth."""
+        return stack.spec.bits in self.bits
+
+
+def _hdrio(options: MergeOptions) -> Callable[[Stack], MethodOutput]:
+    def run(stack: Stack) -> MethodOutput:
+        exposures = ExposureStack.from_arrays(stack.codes, stack.times, code_max=stack.code_max)
+        result = merge_stack(exposures, options)
+        return MethodOutput(result.radiance, result.response.log_inverse)
+
+    return run
+
+
+def _oracle(stack: Stack) -> MethodOutput:
+    """hdrio's default merge given the true response: the error left to the merge alone."""
+    exposures = ExposureStack.from_arrays(stack.codes, stack.times, code_max=stack.code_max)
+    g = stack.curve.log_inverse(np.arange(stack.code_max + 1), stack.code_max)
+    table = np.repeat((g - g[(stack.code_max + 1) // 2])[:, None], 3, axis=1)
+    response = CameraResponse(table, stack.code_max, np.ones(table.shape, dtype=bool),
+                              method="truth")
+    radiance, _ = merge_brackets(exposures, response, MergeOptions().weighting)
+    return MethodOutput(radiance, table)
+
+
+def _opencv_inputs(stack: Stack) -> tuple[list[np.ndarray], np.ndarray]:
+    images = [np.ascontiguousarray(frame[..., ::-1]) for frame in stack.codes]  # RGB -> BGR
+    return images, np.asarray(stack.times, dtype=np.float32)
+
+
+def _opencv_output(radiance: np.ndarray, response: np.ndarray) -> MethodOutput:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_inverse = np.log(response.reshape(-1, 3)[:, ::-1].astype(np.float64))
+    return MethodOutput(radiance[..., ::-1], log_inverse)
+
+
+def _opencv_debevec(stack: Stack) -> MethodOutput:
+    import cv2
+
+    images, times = _opencv_inputs(stack)
+    response = cv2.createCalibrateDebevec().process(images, times)
+    return _opencv_output(cv2.createMergeDebevec().process(images, times, response), response)
+
+
+def _opencv_robertson(stack: Stack) -> MethodOutput:
+    import cv2
+
+    images, times = _opencv_inputs(stack)
+    response = cv2.createCalibrateRobertson().process(images, times)
+    radiance = cv2.createMergeRobertson().process(images, times, response)
+    return _opencv_output(radiance, response)
+
+
+def _colour_hdri(stack: Stack) -> MethodOutput:
+    """colour-hdri's Debevec 1997: Grossberg 2003 samples, lambda 30, its own merge.
+
+    Its exposure is ``1 / average_luminance(N, t, S) = t S / (12.5 N^2)``; with
+    ``N = 1`` and ``S = 100`` that is ``8 t``, proportional to the exposure time.
+    """
+    import colour_hdri
+
+    images = colour_hdri.ImageStack()
+    for frame, time in zip(stack.codes, stack.times):  # shortest first, as it expects
+        metadata = colour_hdri.Metadata(f_number=1.0, exposure_time=float(time), iso=100.0)
+        images.append(colour_hdri.Image(data=frame / float(stack.code_max), metadata=metadata))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "values <= 0", on every bracket with black codes
+        crfs = colour_hdri.camera_response_functions_Debevec1997(images)
+        radiance = colour_hdri.image_stack_to_HDRI(images, camera_response_functions=crfs)
+    with np.errstate(divide="ignore", invalid="ignore"):  # its polynomial ends can dip <= 0
+        return MethodOutput(np.asarray(radiance), np.log(np.asarray(crfs, dtype=np.float64)))
+
+
+HDRIO_VARIANTS: dict[str, tuple[MergeOptions, str]] = {
+    "hdrio default": (MergeOptions(), "triangle weights, 1000 stratified samples, lambda 50, log"),
+    "hdrio tutorial": (MergeOptions(weighting="tutorial-hat", sampling="tutorial"),
+                       "the tutorial's hat weights and sample grid"),
+    "hdrio linear": (MergeOptions(merge="linear"), "default, merged in the linear domain"),
+    "hdrio lambda 10": (MergeOptions(smoothing=10.0), "default with lambda 10"),
+    "hdrio lambda 200": (MergeOptions(smoothing=200.0), "default with lambda 200"),
+    "hdrio 300 samples": (MergeOptions(samples=300), "default with 300 samples"),
+    "hdrio 3000 samples": (MergeOptions(samples=3000), "default with 3000 samples"),
+}
+
+
+def all_methods() -> list[Method]:
+    """Every method, hdrio's first; the reference oracle last."""
+    methods = [Method(name, "hdrio", _hdrio(options), description=text,
+                      settings={k: v for k, v in vars(options).items() if v is not None})
+               for name, (options, text) in HDRIO_VARIANTS.items()]
+    methods += [
+        Method("OpenCV Debevec", "peer", _opencv_debevec, (8,), "cv2",
+               "cv2.createCalibrateDebevec() (70 samples, lambda 10) + createMergeDebevec()"),
+        Method("OpenCV Robertson", "peer", _opencv_robertson, (8,), "cv2",
+               "cv2.createCalibrateRobertson() (30 iterations) + createMergeRobertson()"),
+        Method("colour-hdri Debevec", "peer", _colour_hdri, (8,), "colour_hdri",
+               "camera_response_functions_Debevec1997 + image_stack_to_HDRI"),
+        Method("oracle (true response)", "reference", _oracle,
+               description="hdrio's default merge with the true response: merge error only"),
+    ]
+    return methods
+
+
+def select_methods(names: list[str] | None = None) -> list[Method]:
+    """The methods called ``names`` (case-insensitive), or all of them."""
+    methods = all_methods()
+    if not names:
+        return methods
+    wanted = {name.strip().lower() for name in names}
+    chosen = [m for m in methods if m.name.lower() in wanted]
+    unknown = wanted - {m.name.lower() for m in chosen}
+    if unknown:
+        raise KeyError(f"unknown methods {sorted(unknown)}; known: {[m.name for m in methods]}")
+    return chosen

@@ -1,0 +1,93 @@
+"""The truth harness (benchmarks/truth) in quick mode on a tiny configuration.
+
+Accuracy bounds only, never times: one real scene (GoldenGate, ~250 px wide) rendered
+through two DoRF curves, 7 brackets 2 EV apart, 8-bit, merged by every method.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+# benchmarks/ is not installed with hdrio; `python -m pytest` from the root finds it, a
+# bare `pytest` needs the root on the path (or `pythonpath = ["."]` in pyproject.toml).
+ROOT = str(Path(__file__).resolve().parents[1])
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+from benchmarks.truth.__main__ import main  # noqa: E402
+
+PEERS_OPENCV = ("OpenCV Debevec", "OpenCV Robertson")
+PEERS = (*PEERS_OPENCV, "colour-hdri Debevec")
+
+
+@pytest.fixture(scope="module")
+def run(shared_data, tmp_path_factory):
+    pytest.importorskip("cv2", reason="OpenCV is a benchmark extra: pip install .[bench]")
+    pytest.importorskip("colour_hdri", reason="colour-hdri is a benchmark extra: "
+                                              "pip install .[bench]")
+    pytest.importorskip("matplotlib", reason="matplotlib is a benchmark extra")
+    scene = shared_data("openexr_scenes") / "GoldenGate.exr"
+    shared_data("crf_database")
+    out = tmp_path_factory.mktemp("truth")
+    assert main(["--quick", "--scene", str(scene), "--width", "250", "--out", str(out)]) == 0
+    results = json.loads((out / "truth_quick.json").read_text())
+    return out, results
+
+
+def _rows(results, method):
+    rows = [r for r in results["rows"] if r["method"] == method]
+    assert rows and all(r["status"] == "ok" for r in rows), (method, rows)
+    return {r["stack"]: r for r in rows}
+
+
+def test_outputs_written(run):
+    out, results = run
+    for name in ("truth_quick.json", "truth_quick.md", "truth_quick.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert (out / "truth_quick.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| hdrio default |" in (out / "truth_quick.md").read_text()
+    assert len({r["stack"] for r in results["rows"]}) == 2
+    assert results["environment"]["versions"]["hdrio"]
+
+
+def test_hdrio_outputs_finite_and_positive(run):
+    _, results = run
+    for method in (m["name"] for m in results["methods"] if m["kind"] == "hdrio"):
+        for row in _rows(results, method).values():
+            assert row["nonfinite"] == 0 and row["nonpositive"] == 0, (method, row["stack"])
+
+
+def test_hdrio_default_median_error_within_two_percent(run):
+    _, results = run
+    for key, row in _rows(results, "hdrio default").items():
+        assert row["well"]["median"] <= 0.02, (key, row["well"])
+
+
+def test_hdrio_default_beats_opencv(run):
+    # Measured: hdrio 1.0-1.2 % median, 4.3-4.7 % p99; best OpenCV 1.6-2.8 %, 9.9-15 %.
+    _, results = run
+    ours = _rows(results, "hdrio default")
+    theirs = [_rows(results, peer) for peer in PEERS_OPENCV]
+    for key, row in ours.items():
+        for metric in ("median", "p99"):
+            best = min(peer[key]["well"][metric] for peer in theirs)
+            assert row["well"][metric] <= best, (key, metric, row["well"][metric], best)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "colour-hdri beats hdrio's default on these stacks (median by 0.26 points, p99 by 1.0-1.6 "
+    "points): hdrio's merge drops a pixel from a bracket and every longer one when any "
+    "channel saturates, losing the other channels' best data; hdrio's merge with the true "
+    "response does no better (docs/accuracy.md). Remove this mark when the merge is fixed."))
+def test_hdrio_default_at_least_as_good_as_best_peer(run):
+    _, results = run
+    ours = _rows(results, "hdrio default")
+    theirs = [_rows(results, peer) for peer in PEERS]
+    for key, row in ours.items():
+        for metric in ("median", "p99"):
+            best = min(peer[key]["well"][metric] for peer in theirs)
+            assert row["well"][metric] <= best, (key, metric, row["well"][metric], best)
