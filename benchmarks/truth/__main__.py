@@ -11,6 +11,7 @@ from pathlib import Path
 from benchmarks.truth import DEFAULT_OUT
 from benchmarks.truth.config import full_config, quick_config
 from benchmarks.truth.harness import run
+from benchmarks.truth.methods import select_methods
 from benchmarks.truth.report import write_outputs
 from benchmarks.truth.scenes import DataMissingError
 
@@ -54,6 +55,11 @@ def main(argv: list[str] | None = None) -> int:
         options["width"] = args.width or None
     if args.repeats is not None:
         options["repeats"] = args.repeats
+    try:
+        select_methods(list(options["methods"] or []))
+    except KeyError as error:
+        print(f"error: {error.args[0]}", file=sys.stderr)
+        return 2
     config = (quick_config if args.quick else full_config)(**options)
     command = "python -m benchmarks.truth " + shlex.join(argv if argv is not None
                                                          else sys.argv[1:])
