@@ -175,7 +175,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     start = time.perf_counter()
     if pixel_type == "half":
         result.exposure_scale = half_safe_scale(result.radiance)
-    radiance = result.radiance * np.float32(result.exposure_scale)
+    radiance = (result.radiance if result.exposure_scale == 1.0
+                else result.radiance * np.float32(result.exposure_scale))
     say(f"writing {output}")
     write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type)
     result.timings["write"] = time.perf_counter() - start

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
@@ -10,20 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.truth.scenes import data_root  # one place for ../shared/data lookup
 from hdrio.io.write import write_image
 from hdrio.synthetic import render_brackets
 
-# Real, third-party images live beside the repository and are read in place, never copied.
-DEFAULT_SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-
 # Four brackets two stops apart; the ramp below is well exposed in at least one of them.
 DEFAULT_EXPOSURES = (1 / 16, 1 / 4, 1.0, 4.0)
-
-
-def shared_data_root() -> Path:
-    """``../shared/data`` from the repository root, or ``$HDRIO_TEST_DATA`` when set."""
-    override = os.environ.get("HDRIO_TEST_DATA")
-    return Path(override) if override else DEFAULT_SHARED_DATA
 
 
 @pytest.fixture(scope="session")
@@ -31,7 +22,7 @@ def shared_data() -> Callable[[str], Path]:
     """``get(name)``: the path of a shared data set, or skip the test when it is absent."""
 
     def get(name: str) -> Path:
-        folder = shared_data_root() / name
+        folder = data_root() / name
         if not folder.is_dir():
             pytest.skip(
                 f"../shared/data/{name} not found: third-party test images are read in "
