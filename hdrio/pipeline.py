@@ -38,6 +38,9 @@ class MergeOptions:
     sampling: str = "stratified"
     samples: int | None = None
     merge: str = "log"
+    # Drop a saturated channel on its own, not the whole pixel (the tutorial's "pixel"):
+    # see hdrio/merge/debevec1997.py.
+    saturation: str = "channel"
     exclude_colour: tuple[int, ...] | None = None
     seed: int = 0
     colourspace: str = DEFAULT_SPACE
@@ -88,7 +91,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
     say(f"merging {stack.count} brackets ({options.merge} domain)")
-    radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting)
+    radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting,
+                                                         options.saturation)
     timings["merge"] = time.perf_counter() - start
     return MergeResult(stack, response, radiance, statistics, options, timings)
 
@@ -126,6 +130,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:samples": int(response.parameters.get("samples", 0)),
         "hdrio:seed": int(options.seed),
         "hdrio:mergeDomain": options.merge,
+        "hdrio:saturation": options.saturation,
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
@@ -175,10 +180,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     start = time.perf_counter()
     if pixel_type == "half":
         result.exposure_scale = half_safe_scale(result.radiance)
-    radiance = (result.radiance if result.exposure_scale == 1.0
-                else result.radiance * np.float32(result.exposure_scale))
     say(f"writing {output}")
-    write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type)
+    write_exr(output, result.radiance, exr_attributes(result), pixel_type=pixel_type,
+              scale=result.exposure_scale)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()

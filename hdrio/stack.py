@@ -71,8 +71,9 @@ class ExposureStack:
                 f"{count} images but {exposures.size} exposures, {len(files)} file names"
             )
         order = np.argsort(exposures, kind="stable")
+        in_order = bool(np.all(order == np.arange(count)))
         return cls(
-            codes=codes[order],
+            codes=codes if in_order else codes[order],  # no copy when already sorted
             exposures=exposures[order],
             files=tuple(files[j] for j in order),
             exposure_sources=tuple(sources[j] for j in order),

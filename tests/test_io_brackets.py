@@ -484,13 +484,13 @@ def test_failed_write_leaves_no_temp_file_and_keeps_the_old_file(tmp_path, monke
     before = path.read_bytes()
     seen = []
 
-    def broken_write_image(self, *args, **kwargs):
+    def broken_write_scanlines(self, *args, **kwargs):
         seen.extend(p.name for p in tmp_path.iterdir() if ".partial" in p.name)
         if failure == "raises":
             raise RuntimeError("disk full")
         return False
 
-    monkeypatch.setattr(oiio.ImageOutput, "write_image", broken_write_image)
+    monkeypatch.setattr(oiio.ImageOutput, "write_scanlines", broken_write_scanlines)
     expected = OutputError if failure == "returns False" else RuntimeError
     with pytest.raises(expected):
         write_exr(path, np.full((2, 2, 3), 2.0, np.float32), {"generation": "new"})
@@ -501,7 +501,7 @@ def test_failed_write_leaves_no_temp_file_and_keeps_the_old_file(tmp_path, monke
 
 
 def test_failed_write_of_a_new_file_leaves_nothing(tmp_path, monkeypatch):
-    monkeypatch.setattr(oiio.ImageOutput, "write_image", lambda self, *a, **k: False)
+    monkeypatch.setattr(oiio.ImageOutput, "write_scanlines", lambda self, *a, **k: False)
     with pytest.raises(OutputError, match="new.exr"):
         write_exr(tmp_path / "new.exr", np.ones((2, 2, 3), np.float32))
     assert list(tmp_path.iterdir()) == []
@@ -524,3 +524,15 @@ def test_write_into_a_missing_folder_names_the_file(tmp_path):
         write_exr(path, np.ones((2, 2, 3), np.float32))
     assert str(path) in str(error.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_exr_written_in_bands_with_a_scale_matches_the_input(tmp_path):
+    import OpenImageIO as oiio
+
+    rng = np.random.default_rng(3)
+    rgb = rng.uniform(0.01, 100.0, (131, 17, 3)).astype(np.float32)  # 3 bands, last short
+    before = rgb.copy()
+    path = write_exr(tmp_path / "bands.exr", rgb, pixel_type="float", scale=0.25)
+    back = oiio.ImageInput.open(str(path)).read_image(0, 0, 0, 3, "float")
+    np.testing.assert_array_equal(back, rgb * np.float32(0.25))  # float: exact
+    np.testing.assert_array_equal(rgb, before)  # the caller's pixels are not touched

@@ -25,15 +25,27 @@ def _gamma_response() -> CameraResponse:
     return CameraResponse(np.stack([g] * 3, axis=1), 255, np.ones((256, 3), bool))
 
 
-def test_saturation_policy_drops_bracket_and_longer_ones():
+def test_tutorial_saturation_policy_drops_bracket_and_longer_ones():
     # Pixel saturated (one channel at 255) in the 2nd bracket: only the 1st counts.
     codes = np.array([[[[100, 100, 100]]], [[[255, 120, 120]]], [[[255, 255, 255]]]], np.uint8)
     stack = ExposureStack.from_arrays(codes, [1.0, 4.0, 16.0])
     response = _gamma_response()
-    radiance, stats = merge_brackets(stack, response, "tutorial-hat")
+    radiance, stats = merge_brackets(stack, response, "tutorial-hat", saturation="pixel")
     expected = np.exp(response.log_inverse[100, 0]) / 1.0
     np.testing.assert_allclose(radiance[0, 0], expected, rtol=1e-6)  # float32 output
     assert stats.clipped_everywhere == 0
+
+
+def test_channel_saturation_policy_keeps_the_unsaturated_channels():
+    # Red saturates in the 2nd bracket; green and blue (code 120 there) keep it.
+    codes = np.array([[[[100, 100, 100]]], [[[255, 120, 120]]], [[[255, 255, 255]]]], np.uint8)
+    stack = ExposureStack.from_arrays(codes, [1.0, 4.0, 16.0])
+    response = _gamma_response()
+    radiance, _ = merge_brackets(stack, response, "tutorial-hat")
+    g = response.log_inverse[:, 0]
+    w100, w120 = 101.0, 121.0  # the tutorial hat: z + 1 below the midpoint
+    green = np.exp((w100 * g[100] + w120 * (g[120] - np.log(4.0))) / (w100 + w120))
+    np.testing.assert_allclose(radiance[0, 0], [np.exp(g[100]), green, green], rtol=1e-6)
 
 
 def test_saturated_everywhere_takes_shortest_estimate():

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import os
 import platform
 import statistics
@@ -12,9 +11,9 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from importlib import metadata
 
+from benchmarks.timing import measure_call
 from benchmarks.truth.config import Config
 from benchmarks.truth.curves import load_curve
-from benchmarks.truth.memory import PeakMemory
 from benchmarks.truth.methods import Method, MethodOutput, select_methods
 from benchmarks.truth.metrics import evaluate, regions
 from benchmarks.truth.scenes import REPO_ROOT, Scene, builtin_scenes, read_scene
@@ -75,27 +74,15 @@ def load_scenes(config: Config) -> dict[str, Scene]:
 
 def measure(method: Method, stack: Stack, repeats: int
             ) -> tuple[MethodOutput, list[float], float | None]:
-    """Call ``method`` on ``stack`` ``repeats`` times, each under :class:`PeakMemory`.
+    """Call ``method`` on ``stack`` ``repeats`` times, each under peak-memory sampling.
 
     Returns
     -------
     output, times, peak_mb
         The last output, every wall time (s), the largest peak (MB, ``None`` off Linux).
     """
-    times: list[float] = []
-    peaks: list[float | None] = []
-    output: MethodOutput | None = None
-    for _ in range(max(1, repeats)):
-        output = None
-        gc.collect()
-        with PeakMemory() as memory:
-            start = time.perf_counter()
-            output = method.run(stack)
-            times.append(time.perf_counter() - start)
-        peaks.append(memory.peak_mb)
-    known = [p for p in peaks if p is not None]
-    assert output is not None
-    return output, times, (max(known) if known else None)
+    timing = measure_call(lambda: method.run(stack), repeats)
+    return timing.result, timing.times, timing.peak_mb
 
 
 def run(config: Config, progress: Progress | None = None) -> dict[str, object]:

@@ -139,9 +139,13 @@ def _colour_hdri(stack: Stack) -> MethodOutput:
 
 
 HDRIO_VARIANTS: dict[str, tuple[MergeOptions, str]] = {
-    "hdrio default": (MergeOptions(), "triangle weights, 1000 stratified samples, lambda 50, log"),
-    "hdrio tutorial": (MergeOptions(weighting="tutorial-hat", sampling="tutorial"),
-                       "the tutorial's hat weights and sample grid"),
+    "hdrio default": (MergeOptions(), "triangle weights, 1000 stratified samples, lambda 50, "
+                      "log, per-channel saturation"),
+    "hdrio tutorial": (MergeOptions(weighting="tutorial-hat", sampling="tutorial",
+                                    saturation="pixel"),
+                       "the tutorial's hat weights, sample grid and per-pixel saturation"),
+    "hdrio pixel saturation": (MergeOptions(saturation="pixel"),
+                               "default with the tutorial's per-pixel saturation policy"),
     "hdrio linear": (MergeOptions(merge="linear"), "default, merged in the linear domain"),
     "hdrio lambda 10": (MergeOptions(smoothing=10.0), "default with lambda 10"),
     "hdrio lambda 200": (MergeOptions(smoothing=200.0), "default with lambda 200"),

@@ -9,7 +9,7 @@ import numpy as np
 
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
-from hdrio.merge.debevec1997 import MERGE_METHODS
+from hdrio.merge.debevec1997 import MERGE_METHODS, SATURATION_POLICIES
 from hdrio.merge.weighting import WEIGHTING_METHODS
 from hdrio.pipeline import MergeOptions, MergeResult, merge_files
 from hdrio.response import RESPONSE_METHODS, SAMPLING_METHODS
@@ -46,6 +46,11 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--merge", default=defaults.merge, metavar="DOMAIN",
                        help=f"merge domain: {', '.join(MERGE_METHODS.names())} "
                             "(default %(default)s)")
+    group.add_argument("--saturation", default=defaults.saturation,
+                       choices=SATURATION_POLICIES,
+                       help="a code at the top of the range drops that channel ('channel') "
+                            "or the whole pixel ('pixel', the tutorial's policy) from its "
+                            "bracket and every longer one (default %(default)s)")
     group.add_argument("--exclude-color", type=_colour, default=None, metavar="R,G,B",
                        help="never sample pixels of this code value in any bracket "
                             "(e.g. 0,0,255 for registration borders)")
@@ -59,7 +64,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         weighting=WEIGHTING_METHODS.canonical(args.weighting),
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
-        seed=args.seed,
+        seed=args.seed, saturation=args.saturation,
     )
 
 

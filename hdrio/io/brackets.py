@@ -7,6 +7,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -48,16 +49,34 @@ def _quiet_native_stderr() -> Iterator[None]:
             os.close(saved)
 
 
-def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
-    """Decode one bracket: ``(codes HxWxC, code_max, exif)`` with stored code values.
+_ROWS_PER_READ = 256
 
-    Only 8- and 16-bit integer encodings are brackets; alpha and extra channels are
-    dropped (RGB or a single grey channel are kept). ``exif`` holds ``ExposureTime``,
-    ``FNumber``, ``ISO`` and ``DateTimeOriginal`` where the file has them.
+
+@dataclass(frozen=True)
+class BracketHeader:
+    """What a bracket's header says, read without decoding its pixels."""
+
+    path: Path
+    height: int
+    width: int
+    channels: int
+    code_max: int
+    dtype: type
+    exif: dict
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.height, self.width, self.channels
+
+
+@contextlib.contextmanager
+def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
+    """Open ``path`` with OpenImageIO, check it holds code values, yield its header.
+
+    The libraries' own stderr chatter is silenced for the whole block (decoding included).
     """
     import OpenImageIO as oiio
 
-    path = Path(path)
     if not path.is_file():
         raise InputError(path, "no such file")
     with _quiet_native_stderr():
@@ -75,12 +94,6 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
                     path, f"{base} pixels are not bracket code values; use 8- or 16-bit images"
                 )
             dtype, code_max = _CODE_TYPES[base]
-            channels = 3 if spec.nchannels >= 3 else 1
-            pixels = image.read_image(0, 0, 0, channels, base)
-            if pixels is None or image.has_error:
-                raise InputError(
-                    path, f"cannot decode image ({_first_line(image.geterror()) or 'read failed'})"
-                )
             exif = {
                 "ExposureTime": spec.getattribute("ExposureTime"),
                 "FNumber": spec.getattribute("FNumber"),
@@ -88,10 +101,44 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
                 or spec.getattribute("Exif:ISOSpeedRatings"),
                 "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
             }
+            header = BracketHeader(
+                path, spec.height, spec.width, 3 if spec.nchannels >= 3 else 1, code_max,
+                dtype, {key: value for key, value in exif.items() if value is not None})
+            yield image, header
         finally:
             image.close()
-    codes = np.asarray(pixels, dtype=dtype).reshape(spec.height, spec.width, channels)
-    return codes, code_max, {key: value for key, value in exif.items() if value is not None}
+
+
+def read_header(path: str | Path) -> BracketHeader:
+    """The header of one bracket (size, channels, code range, EXIF), pixels not decoded."""
+    with _open(Path(path)) as (_, header):
+        return header
+
+
+def _decode_into(image, header: BracketHeader, out: np.ndarray) -> None:
+    """Decode ``image`` into ``out`` ``(H, W, C)`` a band of rows at a time (no full copy)."""
+    base = str(np.dtype(header.dtype))
+    for top in range(0, header.height, _ROWS_PER_READ):
+        bottom = min(header.height, top + _ROWS_PER_READ)
+        rows = image.read_scanlines(0, 0, top, bottom, 0, 0, header.channels, base)
+        if rows is None or image.has_error:
+            raise InputError(header.path, "cannot decode image "
+                             f"({_first_line(image.geterror()) or 'read failed'})")
+        out[top:bottom] = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
+
+
+def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
+    """Decode one bracket: ``(codes HxWxC, code_max, exif)`` with stored code values.
+
+    Only 8- and 16-bit integer encodings are brackets; alpha and extra channels are
+    dropped (RGB or a single grey channel are kept). ``exif`` holds ``ExposureTime``,
+    ``FNumber``, ``ISO`` and ``DateTimeOriginal`` where the file has them.
+    """
+    path = Path(path)
+    with _open(path) as (image, header):
+        codes = np.empty(header.shape, dtype=header.dtype)
+        _decode_into(image, header, codes)
+    return codes, header.code_max, header.exif
 
 
 def _first_line(message: str) -> str:
@@ -126,33 +173,41 @@ def read_brackets(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("<no input>", "no images given")
-    decoded = []
-    for done, path in enumerate(paths, start=1):
-        decoded.append(read_codes(path))
-        if progress:
-            progress(done, len(paths), str(path))
-    first_codes, code_max, _ = decoded[0]
-    for path, (codes, this_max, _) in zip(paths, decoded):
-        if codes.shape != first_codes.shape or this_max != code_max:
+    # Headers first: sizes and exposures are checked before any pixel is decoded, and
+    # each bracket is then decoded straight into its slot of one array, in exposure
+    # order (peak memory: the stack plus one band of rows).
+    headers = [read_header(path) for path in paths]
+    first = headers[0]
+    for header in headers[1:]:
+        if header.shape != first.shape or header.code_max != first.code_max:
             raise InputError(
-                path,
-                f"is {_describe(codes, this_max)} but {paths[0]} is "
-                f"{_describe(first_codes, code_max)}: brackets must match",
+                header.path,
+                f"is {_describe(header.shape, header.code_max)} but {paths[0]} is "
+                f"{_describe(first.shape, first.code_max)}: brackets must match",
             )
-    exif = [entry[2] for entry in decoded]
-    values, source = _resolve_exposures(paths, exif, exposures, exposures_from)
+    values, source = _resolve_exposures(paths, [h.exif for h in headers], exposures,
+                                        exposures_from)
+    order = np.argsort(np.asarray(values, dtype=np.float64), kind="stable")
+    codes = np.empty((len(paths), *first.shape), dtype=first.dtype)
+    for done, j in enumerate(order, start=1):
+        with _open(paths[j]) as (image, header):
+            if header.shape != first.shape or header.code_max != first.code_max:
+                raise InputError(paths[j], "changed while being read")
+            _decode_into(image, header, codes[done - 1])
+        if progress:
+            progress(done, len(paths), str(paths[j]))
     return ExposureStack.from_arrays(
-        np.stack([entry[0] for entry in decoded]),
-        values,
-        files=[str(p) for p in paths],
-        code_max=code_max,
+        codes,
+        [values[j] for j in order],
+        files=[str(paths[j]) for j in order],
+        code_max=first.code_max,
         exposure_sources=[source] * len(paths),
-        metadata=exif,
+        metadata=[headers[j].exif for j in order],
     )
 
 
-def _describe(codes: np.ndarray, code_max: int) -> str:
-    height, width, channels = codes.shape
+def _describe(shape: tuple[int, int, int], code_max: int) -> str:
+    height, width, channels = shape
     bits = 8 if code_max == 255 else 16
     return f"{width}x{height}, {channels} channel(s), {bits}-bit"
 

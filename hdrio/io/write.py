@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,15 +51,22 @@ def _type_of(value) -> tuple[str, object]:
     raise TypeError(f"cannot store attribute value {value!r}")
 
 
+_ROWS_PER_WRITE = 64
+
+
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
-                attributes: Mapping[str, object] | None = None) -> Path:
-    """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix."""
+                attributes: Mapping[str, object] | None = None,
+                band: Callable[[np.ndarray], np.ndarray] | None = None) -> Path:
+    """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
+
+    Rows go out in bands of 64, each through ``band`` first when given (a conversion
+    applied band by band needs no full-size copy of the image).
+    """
     import OpenImageIO as oiio
 
     path = Path(path)
     if not path.parent.is_dir():
         raise OutputError(f"{path}: folder {path.parent} does not exist")
-    pixels = np.ascontiguousarray(pixels)
     height, width, channels = pixels.shape
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
     for name, value in (attributes or {}).items():
@@ -71,8 +78,13 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
         if output is None:
             raise OutputError(f"{path}: cannot write this format ({oiio.geterror().strip()})")
         try:
-            if not output.open(str(temp), spec) or not output.write_image(pixels):
+            if not output.open(str(temp), spec):
                 raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+            for top in range(0, height, _ROWS_PER_WRITE):
+                rows = pixels[top: top + _ROWS_PER_WRITE]
+                rows = np.ascontiguousarray(band(rows) if band is not None else rows)
+                if not output.write_scanlines(top, top + rows.shape[0], 0, rows):
+                    raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
         finally:
             output.close()
         os.replace(temp, path)
@@ -83,20 +95,28 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
 
 
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
-              pixel_type: str = "half", compression: str = "zip") -> Path:
+              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
-    Half floats hold 2**-24 .. 65504: values beyond are clamped into that range (so no
-    pixel becomes 0 or Inf); callers keep radiance inside it (see
+    ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
+    or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
+    range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
     :func:`hdrio.pipeline.half_safe_scale`).
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
-    rgb = np.asarray(rgb, dtype=np.float32)
-    if pixel_type == "half":
-        rgb = np.clip(rgb, HALF_MIN_POSITIVE, HALF_MAX)
+    factor = np.float32(scale)
+
+    def band(rows: np.ndarray) -> np.ndarray:
+        rows = np.asarray(rows, dtype=np.float32)
+        if factor != 1:
+            rows = rows * factor
+        if pixel_type == "half":
+            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX)
+        return rows
+
     attributes = {"compression": compression, **(attributes or {})}
-    return write_image(path, rgb, pixel_type, attributes)
+    return write_image(path, rgb, pixel_type, attributes, band)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:

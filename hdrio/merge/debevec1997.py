@@ -1,6 +1,6 @@
 """Merging brackets into a radiance map with a recovered response (Debevec & Malik 1997).
 
-Two domains, one saturation policy:
+Two domains, two saturation policies:
 
 ``log`` (the tutorial's ``hdr.m``)
     ``ln E = sum_j w(Z_j) (g(Z_j) - ln dt_j) / sum_j w(Z_j)``, then ``E = exp(ln E)``.
@@ -9,15 +9,25 @@ Two domains, one saturation policy:
     weighted mean of the brackets' linear estimates (less biased where brackets disagree
     by noise, since the mean of logs underestimates).
 
-Weights are per channel, ``w`` of that channel's own code. Saturation, as in the
-tutorial: a pixel with any channel at ``Z_max`` in bracket ``j`` is dropped from ``j`` and
-from every longer exposure. A pixel saturated even in the shortest bracket takes that
-bracket's estimate alone; a pixel with zero total weight otherwise (only possible with a
-weighting that is zero at the ends, for pixels black in every bracket) takes the longest
-usable bracket's estimate. Every output value is therefore finite and positive.
+Weights are per channel, ``w`` of that channel's own code. Saturation drops an
+observation at ``Z_max`` in bracket ``j`` from ``j`` and from every longer exposure:
+
+``pixel`` (the tutorial's policy)
+    a pixel with any channel at ``Z_max`` is dropped whole, all its channels;
+``channel`` (the default)
+    only the saturated channel is dropped. A pixel whose red clips in the longer
+    brackets keeps their green and blue, which the tutorial's policy throws away: on the
+    truth harness's StillLife stacks this takes the p99 error from 9.5 % to 2.8 % with
+    the true response (docs/accuracy.md).
+
+A channel saturated even in the shortest bracket takes that bracket's estimate alone; a
+channel with zero total weight otherwise (only possible with a weighting that is zero at
+the ends, for pixels black in every bracket) takes the longest usable bracket's
+estimate. Every output value is therefore finite and positive.
 
 The tutorial finds its fallback pixels as those whose sum is exactly 0; we track the
-saturation instead, which agrees except where a sum happens to cancel to 0.
+saturation instead, which agrees except where a sum happens to cancel to 0. The work is
+done by the fused kernel in ``hdrio.merge.kernel``.
 """
 
 from __future__ import annotations
@@ -26,15 +36,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hdrio.merge.kernel import MAX_BRACKETS, exp_in_place, merge_kernel
 from hdrio.merge.weighting import weights_table
 from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
-
-_BLOCK_PIXELS = 1 << 20
-_FLOAT32_TINY = float(np.finfo(np.float32).tiny)
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
-_LOG_FLOAT32_MAX = float(np.log(_FLOAT32_MAX))
 
 
 @dataclass(frozen=True)
@@ -50,16 +56,25 @@ class MergeStatistics:
     """Pixels each bracket contributed to (not dropped by saturation, weight above 0)."""
 
 
-def _estimate_tables(response: CameraResponse, exposure: float, domain: str) -> np.ndarray:
+SATURATION_POLICIES = ("channel", "pixel")
+
+
+def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str) -> np.ndarray:
+    """Per-bracket estimates ``(P, code_max + 1, C)``: ``g(z) - ln dt`` or ``f^-1(z) / dt``."""
+    exposures = np.asarray(exposures, dtype=np.float64)[:, None, None]
     if domain == "log":
-        return response.log_inverse - np.log(exposure)
-    return np.exp(response.log_inverse) / exposure
+        return response.log_inverse[None] - np.log(exposures)
+    with np.errstate(over="ignore"):
+        return np.exp(response.log_inverse)[None] / exposures
 
 
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
-                   weighting: str = "Debevec1997", domain: str = "log"
-                   ) -> tuple[np.ndarray, MergeStatistics]:
+                   weighting: str = "Debevec1997", domain: str = "log",
+                   saturation: str = "channel") -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
+
+    ``saturation`` is ``"channel"`` (default: a saturated channel is dropped on its own)
+    or ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel).
 
     Units: relative scene-linear radiance ``E`` with ``E * dt = f^-1(Z)``: exposures in
     seconds and ``g(z_mid) = 0`` make 1.0 the radiance that a 1-second exposure records at
@@ -67,6 +82,9 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     """
     if domain not in ("log", "linear"):
         raise ValueError(f"merge domain must be 'log' or 'linear', not {domain!r}")
+    if saturation not in SATURATION_POLICIES:
+        raise ValueError(f"saturation policy must be one of {SATURATION_POLICIES}, "
+                         f"not {saturation!r}")
     if response.code_max != stack.code_max:
         raise ValueError(
             f"response is for codes 0..{response.code_max}, brackets are 0..{stack.code_max}"
@@ -75,52 +93,39 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     if response.log_inverse.shape[1] != channels:
         raise ValueError(f"response has {response.log_inverse.shape[1]} channels, "
                          f"brackets have {channels}")
+    if count > MAX_BRACKETS:
+        raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
     # Per channel: codes where g is extrapolated (no weighted sample fell there) say little
-    # about radiance, so they get no weight; the fallbacks below still cover every pixel.
+    # about radiance, so they get no weight; the fallbacks still cover every pixel.
     weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
-    tables = [_estimate_tables(response, t, domain) for t in stack.exposures]
-    channel_index = np.arange(channels)
+    estimates = estimate_tables(response, stack.exposures, domain)
+    # Channel-first tables: the kernel walks one channel's tables at a time.
+    weights_c = np.ascontiguousarray(weights.T)
+    estimates_c = np.ascontiguousarray(estimates.transpose(2, 0, 1))
+    weighted_c = weights_c[:, None, :] * estimates_c
     radiance = np.empty((height, width, channels), dtype=np.float32)
-    used = np.zeros(count, dtype=np.int64)
-    clipped = black = 0
-    rows_per_block = max(1, _BLOCK_PIXELS // max(1, width))
-    for top in range(0, height, rows_per_block):
-        block = stack.codes[:, top: top + rows_per_block]
-        numerator = np.zeros(block.shape[1:], dtype=np.float64)
-        denominator = np.zeros(block.shape[1:], dtype=np.float64)
-        dropped = np.zeros(block.shape[1:3], dtype=bool)
-        fallback = None
-        for j in range(count):
-            codes = block[j]
-            dropped |= np.any(codes == stack.code_max, axis=-1)
-            keep = ~dropped[..., np.newaxis]
-            estimate = tables[j][codes, channel_index]
-            weight = np.where(keep, weights[codes, channel_index], 0.0)
-            numerator += weight * estimate
-            denominator += weight
-            fallback = estimate if fallback is None else np.where(keep, estimate, fallback)
-            used[j] += int(np.count_nonzero(np.any(weight > 0, axis=-1)))
-            if j == 0:
-                clipped += int(np.count_nonzero(dropped))
-        black += int(np.count_nonzero(np.all(block[-1] == 0, axis=-1)))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            merged = np.where(denominator > 0, numerator / denominator, fallback)
-        if domain == "log":
-            merged = np.exp(np.minimum(merged, _LOG_FLOAT32_MAX))
-        radiance[top: top + rows_per_block] = np.clip(merged, _FLOAT32_TINY, _FLOAT32_MAX)
+    used_rows = np.zeros((height, count), dtype=np.int64)
+    clipped_rows = np.zeros(height, dtype=np.int64)
+    black_rows = np.zeros(height, dtype=np.int64)
+    merge_kernel(np.ascontiguousarray(stack.codes), weighted_c, estimates_c, weights_c,
+                 stack.code_max, saturation == "channel", domain == "log",
+                 radiance, used_rows, clipped_rows, black_rows)
+    if domain == "log":
+        exp_in_place(radiance)
     statistics = MergeStatistics(
-        pixels=height * width, clipped_everywhere=clipped, black_everywhere=black,
-        used_per_bracket=tuple(int(u) for u in used),
+        pixels=height * width, clipped_everywhere=int(clipped_rows.sum()),
+        black_everywhere=int(black_rows.sum()),
+        used_per_bracket=tuple(int(u) for u in used_rows.sum(axis=0)),
     )
     return radiance, statistics
 
 
-def _merge_log(stack, response, weighting="Debevec1997"):
-    return merge_brackets(stack, response, weighting, domain="log")
+def _merge_log(stack, response, weighting="Debevec1997", saturation="channel"):
+    return merge_brackets(stack, response, weighting, domain="log", saturation=saturation)
 
 
-def _merge_linear(stack, response, weighting="Debevec1997"):
-    return merge_brackets(stack, response, weighting, domain="linear")
+def _merge_linear(stack, response, weighting="Debevec1997", saturation="channel"):
+    return merge_brackets(stack, response, weighting, domain="linear", saturation=saturation)
 
 
 MERGE_METHODS: MethodRegistry = MethodRegistry(

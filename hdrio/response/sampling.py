@@ -31,6 +31,11 @@ _CANDIDATE_LIMIT = 1_000_000
 _BINS = 32
 
 
+def tutorial_sample_count(count: int, n_levels: int = 256) -> int:
+    """The tutorial's ``N = ceil(2 (n_levels - 1) / (P - 1)) * 2`` for ``P = count`` brackets."""
+    return math.ceil(2 * (n_levels - 1) / (count - 1)) * 2
+
+
 def samples_tutorial(codes: np.ndarray, code_max: int, n_levels: int | None = None,
                      **_ignored) -> np.ndarray:
     """The tutorial's uniform-stride sample indices (see module docstring).
@@ -40,7 +45,7 @@ def samples_tutorial(codes: np.ndarray, code_max: int, n_levels: int | None = No
     """
     count, height, width = codes.shape[:3]
     n_levels = code_max + 1 if n_levels is None else n_levels
-    n_samples = math.ceil(2 * (n_levels - 1) / (count - 1)) * 2
+    n_samples = tutorial_sample_count(count, n_levels)
     pixels = height * width
     n_samples = min(n_samples, pixels)
     step = pixels / n_samples

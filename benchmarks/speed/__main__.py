@@ -1,0 +1,103 @@
+"""``python -m benchmarks.speed``: hdrio's speed and memory against its peers and the floor.
+
+Prints a table and writes ``benchmarks/results/speed.json`` (see docs/speed.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from benchmarks.speed import jit, merge, response
+from benchmarks.speed.scene import bracket_stack
+from benchmarks.truth.harness import environment
+from benchmarks.truth.scenes import REPO_ROOT
+
+SECTIONS = ("jit", "merge", "response")
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.speed", description=__doc__)
+    parser.add_argument("--width", type=int, default=6000)
+    parser.add_argument("--height", type=int, default=4000)
+    parser.add_argument("--brackets", type=int, default=7, help="bracket count, 2 EV apart")
+    parser.add_argument("--repeats", type=int, default=3, help="timed calls per row (median)")
+    parser.add_argument("--only", default=",".join(SECTIONS),
+                        help=f"comma-separated sections: {', '.join(SECTIONS)}")
+    parser.add_argument("--out", type=Path, default=REPO_ROOT / "benchmarks" / "results")
+    return parser.parse_args(argv)
+
+
+def _ratio(rows: list[dict], numerator: str, denominator: str) -> float | None:
+    times = {row["method"]: row.get("seconds") for row in rows}
+    if times.get(numerator) and times.get(denominator):
+        return times[numerator] / times[denominator]
+    return None
+
+
+def ratios(rows: list[dict]) -> dict[str, float | None]:
+    """The acceptance ratios of issue #4, each from rows timed in this run."""
+    return {
+        "merge: OpenCV MergeDebevec / hdrio (log)":
+            _ratio(rows, "OpenCV MergeDebevec", "hdrio merge (log)"),
+        "merge: hdrio (log) / floor": _ratio(rows, "hdrio merge (log)",
+                                             "floor (copy of the codes, all cores)"),
+        "merge: hdrio (linear) / floor": _ratio(rows, "hdrio merge (linear)",
+                                                "floor (copy of the codes, all cores)"),
+        "response: OpenCV / hdrio": _ratio(rows, "OpenCV CalibrateDebevec (defaults)",
+                                           "hdrio response_Debevec1997 (defaults)"),
+    }
+
+
+def table(rows: list[dict]) -> list[str]:
+    lines = ["| section | method | time (s) | peak MB | error |", "|---|---|---:|---:|---|"]
+    for row in rows:
+        error = ", ".join(f"{key} {row[key]:.4g}" for key in
+                          ("median_error", "p99_error", "response_rms_stops") if key in row)
+        seconds = f"{row['seconds']:.3f}" if "seconds" in row else row.get("skipped", "")
+        peak = f"{row['peak_mb']:.0f}" if row.get("peak_mb") is not None else ""
+        lines.append(f"| {row['row']} | {row['method']} | {seconds} | {peak} | {error} |")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    sections = [s.strip() for s in args.only.split(",") if s.strip()]
+    unknown = sorted(set(sections) - set(SECTIONS))
+    if unknown:
+        print(f"unknown section(s): {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    rows: list[dict] = []
+    load_before = os.getloadavg()[0]
+    if "jit" in sections:
+        rows += jit.run()
+    if {"merge", "response"} & set(sections):
+        start = time.perf_counter()
+        stack, radiance = bracket_stack(args.height, args.width, args.brackets)
+        print(f"rendered {args.brackets} brackets {args.width}x{args.height} "
+              f"in {time.perf_counter() - start:.1f} s", file=sys.stderr)
+        if "merge" in sections:
+            rows += merge.run(stack, radiance, args.repeats)
+        if "response" in sections:
+            rows += response.run(stack, args.repeats)
+    results = {"command": "python -m benchmarks.speed " + " ".join(argv or sys.argv[1:]),
+               "size": [args.width, args.height], "brackets": args.brackets,
+               "repeats": args.repeats, "load_average": [load_before, os.getloadavg()[0]],
+               "environment": environment(), "rows": rows, "ratios": ratios(rows)}
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "speed.json"
+    path.write_text(json.dumps(results, indent=2))
+    print("\n".join(table(rows)))
+    for name, value in results["ratios"].items():
+        if value is not None:
+            print(f"{name}: {value:.2f}")
+    print(f"load average {load_before:.2f} -> {os.getloadavg()[0]:.2f}; wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

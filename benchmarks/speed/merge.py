@@ -1,0 +1,55 @@
+"""Merge of decoded brackets: hdrio's fused kernel against OpenCV's MergeDebevec and the floor.
+
+All three get the same code values and the same (true) response, so the error column
+compares the merges alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.speed.floor import parallel_copy
+from benchmarks.speed.scene import true_response
+from benchmarks.timing import measure_call
+from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.stack import ExposureStack
+from hdrio.synthetic import radiance_error, well_exposed
+
+
+def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
+    response = true_response(stack.code_max, stack.codes.shape[-1])
+    mask = well_exposed(stack.codes, stack.code_max)
+    rows: list[dict] = []
+
+    destination = np.empty_like(stack.codes)
+    floor = measure_call(lambda: parallel_copy(stack.codes, destination), repeats, warmup=1)
+    destination = None
+    rows.append({"row": "merge", "method": "floor (copy of the codes, all cores)",
+                 "seconds": floor.seconds, "peak_mb": floor.peak_mb})
+
+    for domain in ("log", "linear"):
+        timing = measure_call(lambda d=domain: merge_brackets(stack, response, domain=d)[0],
+                              repeats, warmup=1)
+        rows.append({"row": "merge", "method": f"hdrio merge ({domain})",
+                     "seconds": timing.seconds, "peak_mb": timing.peak_mb,
+                     "median_error": radiance_error(timing.result, radiance, mask)["median"],
+                     "p99_error": radiance_error(timing.result, radiance, mask)["p99"]})
+        timing.result = None
+
+    try:
+        import cv2
+    except ImportError:
+        rows.append({"row": "merge", "method": "OpenCV MergeDebevec",
+                     "skipped": "opencv-python-headless is not installed (the bench extra)"})
+        return rows
+    images = list(stack.codes)  # contiguous views, no copy
+    times = np.asarray(stack.exposures, dtype=np.float32)
+    cv_response = np.exp(response.log_inverse).astype(np.float32).reshape(-1, 1, 3)
+    merge = cv2.createMergeDebevec()
+    timing = measure_call(lambda: merge.process(images, times, cv_response), repeats,
+                          warmup=1)
+    rows.append({"row": "merge", "method": "OpenCV MergeDebevec", "seconds": timing.seconds,
+                 "peak_mb": timing.peak_mb,
+                 "median_error": radiance_error(timing.result, radiance, mask)["median"],
+                 "p99_error": radiance_error(timing.result, radiance, mask)["p99"]})
+    return rows

@@ -1,0 +1,52 @@
+"""A direct NumPy port of the merge, kept as the oracle for the fused kernel.
+
+Vectorised over pixels, looping over brackets exactly as the tutorial's ``hdr.m`` does,
+with the per-channel saturation policy beside the tutorial's per-pixel one. Slow (it
+makes several full-size temporaries per bracket) but obviously right.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hdrio.merge.debevec1997 import estimate_tables
+from hdrio.merge.weighting import weights_table
+
+FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def merge_reference(stack, response, weighting="Debevec1997", domain="log",
+                    saturation="channel"):
+    """Radiance ``(H, W, C)`` float32 and ``(clipped, black, used_per_bracket)``."""
+    count, height, width, channels = stack.codes.shape
+    weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
+    tables = estimate_tables(response, stack.exposures, domain)
+    channel_index = np.arange(channels)
+    numerator = np.zeros((height, width, channels))
+    denominator = np.zeros((height, width, channels))
+    dropped = np.zeros((height, width, channels), dtype=bool)
+    fallback = None
+    used = []
+    for j in range(count):
+        codes = stack.codes[j].astype(np.int64)
+        saturated = codes == stack.code_max
+        if saturation == "pixel":
+            saturated = np.repeat(np.any(saturated, axis=-1, keepdims=True), channels, -1)
+        dropped |= saturated
+        keep = ~dropped
+        estimate = tables[j][codes, channel_index]
+        weight = np.where(keep, weights[codes, channel_index], 0.0)
+        numerator += weight * estimate
+        denominator += weight
+        fallback = estimate if fallback is None else np.where(keep, estimate, fallback)
+        used.append(int(np.count_nonzero(np.any(weight > 0, axis=-1))))
+        if j == 0:
+            clipped = int(np.count_nonzero(np.any(codes == stack.code_max, axis=-1)))
+    black = int(np.count_nonzero(np.all(stack.codes[-1] == 0, axis=-1)))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        merged = np.where(denominator > 0, numerator / denominator, fallback)
+        if domain == "log":
+            merged = np.exp(np.minimum(merged, np.log(FLOAT32_MAX)))
+    radiance = np.clip(merged, FLOAT32_TINY, FLOAT32_MAX).astype(np.float32)
+    return radiance, (clipped, black, tuple(used))
