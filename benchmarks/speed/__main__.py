@@ -12,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks.speed import jit, merge, response
+from benchmarks.speed import endtoend, jit, merge, response
 from benchmarks.speed.scene import bracket_stack
 from benchmarks.truth.harness import environment
 from benchmarks.truth.scenes import REPO_ROOT
 
-SECTIONS = ("jit", "merge", "response")
+SECTIONS = ("jit", "merge", "response", "endtoend")
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
@@ -50,6 +50,10 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
                                                 "floor (copy of the codes, all cores)"),
         "response: OpenCV / hdrio": _ratio(rows, "OpenCV CalibrateDebevec (defaults)",
                                            "hdrio response_Debevec1997 (defaults)"),
+        "end to end: hdrio / I/O floor": next(
+            (row["seconds"] / floor["seconds"] for row in rows
+             if row["method"].startswith("hdrio merge (") for floor in rows
+             if floor["method"].startswith("I/O floor")), None),
     }
 
 
@@ -59,7 +63,8 @@ def table(rows: list[dict]) -> list[str]:
         error = ", ".join(f"{key} {row[key]:.4g}" for key in
                           ("median_error", "p99_error", "response_rms_stops") if key in row)
         seconds = f"{row['seconds']:.3f}" if "seconds" in row else row.get("skipped", "")
-        peak = f"{row['peak_mb']:.0f}" if row.get("peak_mb") is not None else ""
+        peak = row.get("process_peak_mb", row.get("peak_mb"))
+        peak = f"{peak:.0f}" if peak is not None else ""
         lines.append(f"| {row['row']} | {row['method']} | {seconds} | {peak} | {error} |")
     return lines
 
@@ -75,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     load_before = os.getloadavg()[0]
     if "jit" in sections:
         rows += jit.run()
-    if {"merge", "response"} & set(sections):
+    if {"merge", "response", "endtoend"} & set(sections):
         start = time.perf_counter()
         stack, radiance = bracket_stack(args.height, args.width, args.brackets)
         print(f"rendered {args.brackets} brackets {args.width}x{args.height} "
@@ -84,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
             rows += merge.run(stack, radiance, args.repeats)
         if "response" in sections:
             rows += response.run(stack, args.repeats)
+        if "endtoend" in sections:
+            rows += endtoend.run(stack, args.repeats)
     results = {"command": "python -m benchmarks.speed " + " ".join(argv or sys.argv[1:]),
                "size": [args.width, args.height], "brackets": args.brackets,
                "repeats": args.repeats, "load_average": [load_before, os.getloadavg()[0]],

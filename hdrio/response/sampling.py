@@ -63,24 +63,28 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     stride = max(1, math.ceil(math.sqrt(height * width / _CANDIDATE_LIMIT)))
     grid = codes[:, ::stride, ::stride, :]
     grid_h, grid_w = grid.shape[1:3]
-    flat = grid.reshape(count, grid_h * grid_w, -1)
-    unclipped = np.all((flat > 0) & (flat < code_max), axis=2)  # (P, M)
-    informative = unclipped.sum(axis=0) >= 2
+    # One bracket at a time: the temporaries are a few bytes per candidate, not per
+    # candidate and bracket (this solve's memory must not grow with the bracket count).
+    unclipped = np.empty((count, grid_h * grid_w), dtype=bool)  # (P, M)
+    for j in range(count):
+        frame = grid[j].reshape(grid_h * grid_w, -1)
+        unclipped[j] = np.all((frame > 0) & (frame < code_max), axis=1)
+    informative = np.count_nonzero(unclipped, axis=0) >= 2
     if exclude is not None:
         informative &= ~np.asarray(exclude, dtype=bool)[::stride, ::stride].reshape(-1)
     candidates = np.flatnonzero(informative)
     if candidates.size == 0:
         return np.empty(0, dtype=np.int64)
     rng = np.random.default_rng(seed)
-    level = flat[:, candidates, :].mean(axis=2)  # (P, K) mean code per bracket
-    bins = np.minimum((level / (code_max + 1) * _BINS).astype(np.int64), _BINS - 1)
     per_bin = max(1, math.ceil(n_samples / (count * _BINS)))
     chosen: list[np.ndarray] = []
     for j in range(count):
+        level = grid[j].reshape(grid_h * grid_w, -1)[candidates].mean(axis=1)  # mean code
+        bins = np.minimum((level / (code_max + 1) * _BINS).astype(np.int64), _BINS - 1)
         members = np.flatnonzero(unclipped[j, candidates])
         members = members[rng.permutation(members.size)]
-        order = members[np.argsort(bins[j, members], kind="stable")]
-        sorted_bins = bins[j, order]
+        order = members[np.argsort(bins[members], kind="stable")]
+        sorted_bins = bins[order]
         first_of_bin = np.searchsorted(sorted_bins, sorted_bins, side="left")
         rank_in_bin = np.arange(order.size) - first_of_bin
         chosen.append(order[rank_in_bin < per_bin])
