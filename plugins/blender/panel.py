@@ -1,0 +1,35 @@
+"""The hdrio panel in the compositor's sidebar (N panel, tab "hdrio")."""
+
+from __future__ import annotations
+
+import bpy
+
+from .nodes import HdrioMergeNode
+
+
+class HDRIO_PT_compositor(bpy.types.Panel):
+    bl_label = "hdrio"
+    bl_space_type = "NODE_EDITOR"
+    bl_region_type = "UI"
+    bl_category = "hdrio"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context.space_data, "tree_type", "") == "CompositorNodeTree"
+
+    def draw(self, context):
+        layout = self.layout
+        column = layout.column(align=True)
+        column.operator("hdrio.add_node", text="HDR Merge").node_type = (
+            "CompositorNodeHdrioMerge")
+        column.operator("hdrio.add_node", text="Reinhard Global").node_type = (
+            "CompositorNodeHdrioReinhardGlobal")
+        layout.operator("hdrio.merge_to_exr", icon="IMAGE_DATA")
+        node = context.active_node
+        if isinstance(node, HdrioMergeNode):
+            box = layout.box()
+            box.label(text=node.name)
+            node.draw_buttons(context, box)
+
+
+CLASSES = (HDRIO_PT_compositor,)
