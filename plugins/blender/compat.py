@@ -50,3 +50,13 @@ def active_compositor_tree(context: bpy.types.Context) -> bpy.types.NodeTree | N
     if tree is not None and tree.bl_idname == "CompositorNodeTree":
         return tree
     return compositor_tree(context.scene, create=False)
+
+
+def find_node_tree(name: str) -> bpy.types.NodeTree | None:
+    """A node tree by name: a node group, or (4.x) a scene's embedded compositor tree."""
+    tree = bpy.data.node_groups.get(name)
+    if tree is not None:
+        return tree
+    return next((scene.node_tree for scene in bpy.data.scenes
+                 if getattr(scene, "node_tree", None) is not None
+                 and scene.node_tree.name == name), None)

@@ -14,7 +14,7 @@ from hdrio.errors import HdrioError
 from .baking import BakedResponse, bake_response, linear_response
 from .exposures import exposures_for_files
 from .merge_graph import build_merge_graph
-from .reinhard_graph import build_reinhard_global_graph
+from .reinhard_graph import DEFAULT_KEY, DEFAULT_SATURATION, build_reinhard_global_graph
 
 MAX_BRACKETS = 16
 # 1/16 s, 1/4 s, 1 s, 4 s, ...: distinct starting values two stops apart.
@@ -163,6 +163,9 @@ class HdrioReinhardGlobalNode(bpy.types.CompositorNodeCustomGroup):
         tree = bpy.data.node_groups.new(".hdrio Reinhard Global", "CompositorNodeTree")
         self.node_tree = tree
         build_reinhard_global_graph(tree)
+        # A new node's sockets start at 0, not at the interface's defaults.
+        self.inputs["Key"].default_value = DEFAULT_KEY
+        self.inputs["Saturation"].default_value = DEFAULT_SATURATION
 
     def copy(self, node) -> None:
         self.node_tree = node.node_tree.copy()

@@ -20,13 +20,13 @@ from hdrio.pipeline import MergeOptions, merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
 
 from .baking import bake_response
-from .compat import active_compositor_tree, compositor_tree
+from .compat import active_compositor_tree, compositor_tree, find_node_tree
 from .nodes import HdrioMergeNode, image_path
 
 
 def _merge_node(context, tree_name: str, node_name: str) -> HdrioMergeNode | None:
     if tree_name and node_name:
-        tree = bpy.data.node_groups.get(tree_name)
+        tree = find_node_tree(tree_name)
         node = tree.nodes.get(node_name) if tree is not None else None
     else:
         node = getattr(context, "node", None) or getattr(context, "active_node", None)
