@@ -24,12 +24,18 @@ def _classes() -> tuple:
 def register() -> None:
     import bpy
 
+    from . import panel
+
     for cls in _classes():
         bpy.utils.register_class(cls)
+    panel.register_menus()
 
 
 def unregister() -> None:
     import bpy
 
+    from . import panel
+
+    panel.unregister_menus()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

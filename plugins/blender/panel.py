@@ -32,4 +32,25 @@ class HDRIO_PT_compositor(bpy.types.Panel):
             node.draw_buttons(context, box)
 
 
+def draw_add_menu(menu, context) -> None:
+    """hdrio's nodes at the end of the compositor's Add > Color menu."""
+    layout = menu.layout
+    layout.separator()
+    for idname, label in (("CompositorNodeHdrioMerge", "HDR Merge"),
+                          ("CompositorNodeHdrioReinhardGlobal", "Reinhard Global")):
+        operator = layout.operator("node.add_node", text=label)
+        operator.type = idname
+        operator.use_transform = True
+
+
+ADD_MENU = "NODE_MT_category_compositor_color"  # in Blender 4.2 to 5.0
+
 CLASSES = (HDRIO_PT_compositor,)
+
+
+def register_menus() -> None:
+    getattr(bpy.types, ADD_MENU).append(draw_add_menu)
+
+
+def unregister_menus() -> None:
+    getattr(bpy.types, ADD_MENU).remove(draw_add_menu)

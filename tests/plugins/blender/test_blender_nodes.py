@@ -38,6 +38,13 @@ def registered_node(idname: str):
     return bpy.types.Node.bl_rna_get_subclass_py(idname)
 
 
+def registered_in_add_menu() -> bool:
+    from plugins.blender import panel
+
+    menu = getattr(bpy.types, panel.ADD_MENU)
+    return panel.draw_add_menu in getattr(menu.draw, "_draw_funcs", ())
+
+
 def gamma_camera_response(gamma: float = 2.2, code_max: int = 255) -> CameraResponse:
     """``f^-1(Z) = (Z / code_max)^gamma``, the response hdrio.synthetic renders with.
 
@@ -54,6 +61,7 @@ def test_register_adds_and_unregister_removes_the_nodes():
     try:
         assert registered_node("CompositorNodeHdrioMerge") is not None
         assert registered_node("CompositorNodeHdrioReinhardGlobal") is not None
+        assert registered_in_add_menu()
         tree = clean_compositor(bpy.context.scene)
         node = tree.nodes.new("CompositorNodeHdrioMerge")
         assert [s.name for s in node.inputs] == ["Bracket 1", "Bracket 2", "Bracket 3"]
@@ -64,6 +72,7 @@ def test_register_adds_and_unregister_removes_the_nodes():
         addon.unregister()
     assert registered_node("CompositorNodeHdrioMerge") is None
     assert registered_node("CompositorNodeHdrioReinhardGlobal") is None
+    assert not registered_in_add_menu()
     assert "solve_response" not in dir(bpy.ops.hdrio)
 
 
