@@ -40,6 +40,15 @@ def image_path(image: bpy.types.Image | None) -> str | None:
     return bpy.path.abspath(image.filepath, library=image.library)
 
 
+def free_private_tree(node: bpy.types.CompositorNodeCustomGroup) -> None:
+    """Remove the node's own group tree (private: ``copy`` gives each copy its own).
+
+    Not counted by ``users``: Blender 5.0 reports 2 users for a tree only this node holds.
+    """
+    if node.node_tree is not None:
+        bpy.data.node_groups.remove(node.node_tree)
+
+
 def _rebuild_merge(node: HdrioMergeNode, _context=None) -> None:
     node.rebuild()
 
@@ -80,8 +89,7 @@ class HdrioMergeNode(bpy.types.CompositorNodeCustomGroup):
         self.node_tree = node.node_tree.copy()
 
     def free(self) -> None:
-        if self.node_tree is not None and self.node_tree.users <= 1:
-            bpy.data.node_groups.remove(self.node_tree)
+        free_private_tree(self)
 
     @property
     def baked(self) -> BakedResponse:
@@ -171,8 +179,7 @@ class HdrioReinhardGlobalNode(bpy.types.CompositorNodeCustomGroup):
         self.node_tree = node.node_tree.copy()
 
     def free(self) -> None:
-        if self.node_tree is not None and self.node_tree.users <= 1:
-            bpy.data.node_groups.remove(self.node_tree)
+        free_private_tree(self)
 
 
 CLASSES = (HdrioMergeNode, HdrioReinhardGlobalNode)

@@ -123,10 +123,13 @@ class HDRIO_OT_tonemap_local(bpy.types.Operator):
 
     def execute(self, context):
         image = bpy.data.images.get(self.image_name)
-        if image is None or not image.has_data and not image.pixels:
-            self.report({"ERROR"}, f"no image named {self.image_name!r} with pixels")
+        if image is None:
+            self.report({"ERROR"}, f"no image named {self.image_name!r}")
             return {"CANCELLED"}
         width, height = image.size
+        if width * height == 0:
+            self.report({"ERROR"}, f"{image.filepath or image.name}: image has no pixels")
+            return {"CANCELLED"}
         pixels = np.empty(width * height * 4, dtype=np.float32)
         image.pixels.foreach_get(pixels)
         rgba = pixels.reshape(height, width, 4)
