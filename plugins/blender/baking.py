@@ -32,6 +32,23 @@ CURVE_POINTS = 256
 """Points per baked curve. For 8-bit brackets there is one point at every code value, so
 the curve is exact there; 16-bit responses are sampled at 256 evenly spaced codes."""
 
+CURVE_TABLE_SIZE = 256
+"""Blender's curve table resolution (``CM_TABLE`` in DNA_color_types.h)."""
+
+
+def table_squeeze(positions: np.ndarray) -> float:
+    """Factor putting evenly spaced ``positions`` on [0, 1] onto the curve table's samples.
+
+    ``N`` points from 0 to 1 land on samples ``0 .. N - 1`` when multiplied by
+    ``(N - 1) / CURVE_TABLE_SIZE``; anything else is left as it is (factor 1).
+    """
+    count = len(positions)
+    # 16-bit codes are rounded to integers: within half a code (< 1e-5) of even.
+    even = np.allclose(positions, np.linspace(0.0, 1.0, count), rtol=0, atol=1e-5)
+    if not even or count - 1 > CURVE_TABLE_SIZE:
+        return 1.0
+    return (count - 1) / CURVE_TABLE_SIZE
+
 
 @dataclass(frozen=True)
 class BakedResponse:

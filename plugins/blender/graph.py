@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
+from .baking import table_squeeze
 from .compat import MATH_NODE
 
 Operand = "bpy.types.NodeSocket | float"
@@ -81,12 +82,20 @@ class GraphBuilder:
         """An RGB Curves node mapping each channel through ``values[:, c]`` at ``positions``.
 
         Points are joined by straight segments (vector handles); the combined curve
-        stays the identity.
+        stays the identity. Blender evaluates a curve through a table of
+        257 samples at ``i / 256``, interpolating between
+        them; evenly spaced points are therefore squeezed onto those samples (and the
+        input scaled to match), so that each point's value is returned exactly there. A
+        one-code notch in the weights (a code the solve never sampled) survives this;
+        points between samples would be blurred into their neighbours.
         """
         node = self.add("CompositorNodeCurveRGB", label=label)
+        squeeze = table_squeeze(positions)
         for channel in range(3):
-            set_curve(node.mapping.curves[channel], positions, values[:, channel])
+            set_curve(node.mapping.curves[channel], positions * squeeze, values[:, channel])
         node.mapping.update()
+        # White Level divides the input: z * squeeze reaches the squeezed points.
+        node.inputs["White Level"].default_value = (1.0 / squeeze,) * 3 + (1.0,)
         self.connect(colour, node.inputs["Image"])
         return node.outputs[0]
 

@@ -12,7 +12,13 @@ import pytest
 from hdrio.errors import InputError
 from hdrio.merge.weighting import weights_table
 from hdrio.response.curve import CameraResponse
-from plugins.blender.baking import BakedResponse, bake_response, linear_response
+from plugins.blender.baking import (
+    CURVE_TABLE_SIZE,
+    BakedResponse,
+    bake_response,
+    linear_response,
+    table_squeeze,
+)
 from plugins.blender.build import extension_files, manifest_fields, manifest_text
 from plugins.blender.exposures import exposures_for_files, sorted_order
 
@@ -126,3 +132,16 @@ def test_extension_ships_the_addon_modules_not_the_build_script():
     names = {path.name for path in extension_files()}
     assert {"__init__.py", "nodes.py", "operators.py", "baking.py"} <= names
     assert "build.py" not in names
+
+
+def test_curve_points_land_on_blender_curve_table_samples():
+    # 256 points for 8-bit codes: point k goes to k / 256, sample k of Blender's table.
+    baked = bake_response(smooth_response())
+    squeezed = baked.positions * table_squeeze(baked.positions) * CURVE_TABLE_SIZE
+    np.testing.assert_allclose(squeezed, np.arange(256), rtol=0, atol=1e-9)
+    # 16-bit codes rounded to integers are still even enough to align.
+    sixteen = bake_response(smooth_response(code_max=65535))
+    assert table_squeeze(sixteen.positions) == pytest.approx(255 / 256)
+    # Uneven points, or more points than samples, are left where they are.
+    assert table_squeeze(np.array([0.0, 0.1, 1.0])) == 1.0
+    assert table_squeeze(np.linspace(0.0, 1.0, 300)) == 1.0

@@ -98,11 +98,15 @@ def test_merge_node_matches_hdrio_linear_merge(registered, write_brackets, tmp_p
     stack = read_brackets(paths)
     reference, _ = merge_brackets(stack, response, "Debevec1997", domain="linear")
     difference = relative_difference(merged, reference)
-    print(f"median {np.median(difference):.2e} p99 {np.percentile(difference, 99):.2e}")
-    # The acceptance bounds (measured: median 8e-5, p99 3e-4; the curves are
-    # evaluated through Blender's 257-entry curve table, hence not exact).
+    print(f"known response: median {np.median(difference):.2e} "
+          f"p99 {np.percentile(difference, 99):.2e} max {difference.max():.2e}")
+    # The acceptance bounds ...
     assert np.median(difference) <= 0.01
     assert np.percentile(difference, 99) <= 0.03
+    # ... and what the node actually achieves: its curves return the baked values exactly
+    # at every code, so only float32 rounding in the Math nodes is left (measured max
+    # 2e-6); 1e-4 would still catch a curve blurred between codes (1e-3 to 1e-1).
+    assert difference.max() <= 1e-4
 
     # Exposures are editable: twice every exposure time is half the radiance.
     node.exposures = [2.0 * t for t in node.exposures]
