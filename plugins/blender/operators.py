@@ -121,6 +121,12 @@ class HDRIO_OT_tonemap_local(bpy.types.Operator):
 
     image_name: StringProperty(name="Image")  # type: ignore[valid-type]
 
+    def invoke(self, context, event):
+        return context.window_manager.invoke_props_dialog(self)
+
+    def draw(self, context):
+        self.layout.prop_search(self, "image_name", bpy.data, "images")
+
     def execute(self, context):
         image = bpy.data.images.get(self.image_name)
         if image is None:

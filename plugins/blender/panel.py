@@ -25,6 +25,7 @@ class HDRIO_PT_compositor(bpy.types.Panel):
         column.operator("hdrio.add_node", text="Reinhard Global").node_type = (
             "CompositorNodeHdrioReinhardGlobal")
         layout.operator("hdrio.merge_to_exr", icon="IMAGE_DATA")
+        layout.operator("hdrio.tonemap_local", icon="IMAGE_RGB")
         node = context.active_node
         if isinstance(node, HdrioMergeNode):
             box = layout.box()
