@@ -40,13 +40,17 @@ def image_path(image: bpy.types.Image | None) -> str | None:
     return bpy.path.abspath(image.filepath, library=image.library)
 
 
-def free_private_tree(node: bpy.types.CompositorNodeCustomGroup) -> None:
-    """Remove the node's own group tree (private: ``copy`` gives each copy its own).
+class PrivateGroupMixin:
+    """A group node whose tree is its own: a copied node gets a copy, a deleted node
+    takes its tree along (not decided by ``users``: Blender 5.0 counts 2 users for a tree
+    only this node holds)."""
 
-    Not counted by ``users``: Blender 5.0 reports 2 users for a tree only this node holds.
-    """
-    if node.node_tree is not None:
-        bpy.data.node_groups.remove(node.node_tree)
+    def copy(self, node) -> None:
+        self.node_tree = node.node_tree.copy()
+
+    def free(self) -> None:
+        if self.node_tree is not None:
+            bpy.data.node_groups.remove(self.node_tree)
 
 
 def _rebuild_merge(node: HdrioMergeNode, _context=None) -> None:
@@ -58,7 +62,7 @@ def _resize_merge(node: HdrioMergeNode, _context=None) -> None:
     node.rebuild()
 
 
-class HdrioMergeNode(bpy.types.CompositorNodeCustomGroup):
+class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     """Merge bracketed exposures into scene-linear radiance (hdrio's linear merge)."""
 
     bl_idname = "CompositorNodeHdrioMerge"
@@ -84,12 +88,6 @@ class HdrioMergeNode(bpy.types.CompositorNodeCustomGroup):
         self.node_tree = tree
         self.resize_interface()
         self.rebuild()
-
-    def copy(self, node) -> None:
-        self.node_tree = node.node_tree.copy()
-
-    def free(self) -> None:
-        free_private_tree(self)
 
     @property
     def baked(self) -> BakedResponse:
@@ -158,7 +156,7 @@ def _rebuild_reinhard(node: HdrioReinhardGlobalNode, _context=None) -> None:
     build_reinhard_global_graph(node.node_tree)
 
 
-class HdrioReinhardGlobalNode(bpy.types.CompositorNodeCustomGroup):
+class HdrioReinhardGlobalNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     """Reinhard et al. (2002) global operator from native nodes (key from Levels' mean)."""
 
     bl_idname = "CompositorNodeHdrioReinhardGlobal"
@@ -174,12 +172,6 @@ class HdrioReinhardGlobalNode(bpy.types.CompositorNodeCustomGroup):
         # A new node's sockets start at 0, not at the interface's defaults.
         self.inputs["Key"].default_value = DEFAULT_KEY
         self.inputs["Saturation"].default_value = DEFAULT_SATURATION
-
-    def copy(self, node) -> None:
-        self.node_tree = node.node_tree.copy()
-
-    def free(self) -> None:
-        free_private_tree(self)
 
 
 CLASSES = (HdrioMergeNode, HdrioReinhardGlobalNode)

@@ -13,8 +13,10 @@ bpy = pytest.importorskip(
                   "plugins/blender/ci/run_tests.sh")
 
 from blender_scene import (  # noqa: E402
+    assert_matches_merge,
     clean_compositor,
     image_node,
+    merge_node_with,
     relative_difference,
     render_to_exr,
 )
@@ -44,15 +46,6 @@ def read_exr(path) -> tuple[np.ndarray, dict]:
     return np.asarray(buffer.get_pixels(oiio.FLOAT)), attributes
 
 
-def merge_node_with(tree, paths):
-    node = tree.nodes.new("CompositorNodeHdrioMerge")
-    node.bracket_count = len(paths)
-    for index, path in enumerate(paths):
-        tree.links.new(image_node(tree, path).outputs["Image"], node.inputs[index])
-    node.update()
-    return node
-
-
 def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     size = (40, 96)
     paths = write_brackets(size=size)
@@ -66,14 +59,7 @@ def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
 
     reference = merge_stack(read_brackets(paths), MergeOptions(merge="linear")).radiance
-    difference = relative_difference(merged, reference)
-    print(f"solved: median {np.median(difference):.2e} p99 "
-          f"{np.percentile(difference, 99):.2e} max {difference.max():.2e}")
-    # The acceptance bounds for the node against hdrio's own linear merge, and
-    # float32 rounding as the largest difference (see test_blender_nodes).
-    assert np.median(difference) <= 0.01
-    assert np.percentile(difference, 99) <= 0.03
-    assert difference.max() <= 1e-4
+    assert_matches_merge("solved", merged, reference)
 
 
 def test_merge_node_matches_hdrio_on_real_brackets(shared_data, tmp_path):
@@ -90,12 +76,7 @@ def test_merge_node_matches_hdrio_on_real_brackets(shared_data, tmp_path):
     assert not np.all(result.response.supported[1:-1])  # the case this test is about
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
                            result.radiance.shape[:2])
-    difference = relative_difference(merged, result.radiance)
-    print(f"frobisher: median {np.median(difference):.2e} p99 "
-          f"{np.percentile(difference, 99):.2e} max {difference.max():.2e}")
-    assert np.median(difference) <= 0.01
-    assert np.percentile(difference, 99) <= 0.03
-    assert difference.max() <= 1e-4
+    assert_matches_merge("frobisher", merged, result.radiance)
 
 
 def test_solve_without_linked_images_reports_an_error():
