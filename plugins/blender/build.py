@@ -49,7 +49,15 @@ def _pip(*arguments: str) -> None:
 
 def collect_wheels(platform: str, folder: Path) -> list[Path]:
     """hdrio's wheel and its dependencies' wheels for ``platform`` in ``folder``."""
-    _pip("wheel", "--no-deps", "-w", str(folder), str(REPOSITORY))
+    # Built from a clean copy: setuptools would reuse (and could ship stale files from)
+    # the checkout's build/ folder, and the checkout stays untouched.
+    source = folder / "source"
+    shutil.copytree(REPOSITORY / "hdrio", source / "hdrio",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(REPOSITORY / name, source / name)
+    _pip("wheel", "--no-deps", "-w", str(folder), str(source))
+    shutil.rmtree(source)
     hdrio_wheel = next(folder.glob("hdrio-*.whl"))
     constraints = folder / "constraints.txt"
     constraints.write_text("\n".join(CONSTRAINTS) + "\n")
