@@ -1,0 +1,175 @@
+"""Operators: solve the camera response into an HDR Merge node, merge brackets to an EXR,
+tone-map an image with hdrio's local operator, add the nodes.
+
+Every hdrio error (bad input, unsolvable response) is reported in Blender's UI as one
+line naming the file and the problem, and the operator is cancelled: no traceback.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy.props import CollectionProperty, EnumProperty, StringProperty
+
+from hdrio.errors import HdrioError
+from hdrio.io.brackets import read_brackets
+from hdrio.pipeline import MergeOptions, merge_files, merge_stack
+from hdrio.tonemap import TONEMAP_METHODS
+
+from .baking import bake_response
+from .compat import active_compositor_tree, compositor_tree, find_node_tree
+from .nodes import HdrioMergeNode, image_path
+
+
+def _merge_node(context, tree_name: str, node_name: str) -> HdrioMergeNode | None:
+    if tree_name and node_name:
+        tree = find_node_tree(tree_name)
+        node = tree.nodes.get(node_name) if tree is not None else None
+    else:
+        node = getattr(context, "node", None) or getattr(context, "active_node", None)
+    return node if isinstance(node, HdrioMergeNode) else None
+
+
+class HDRIO_OT_solve_response(bpy.types.Operator):
+    """Solve the camera response (Debevec 1997) from the node's bracket images and bake it
+    into the node's curves"""
+
+    bl_idname = "hdrio.solve_response"
+    bl_label = "Solve Camera Response"
+    bl_options = {"REGISTER", "UNDO"}
+
+    tree_name: StringProperty(options={"SKIP_SAVE"})  # type: ignore[valid-type]
+    node_name: StringProperty(options={"SKIP_SAVE"})  # type: ignore[valid-type]
+
+    def execute(self, context):
+        node = _merge_node(context, self.tree_name, self.node_name)
+        if node is None:
+            self.report({"ERROR"}, "no HDR Merge node selected")
+            return {"CANCELLED"}
+        paths = [image_path(image) for image in node.bracket_images()]
+        if not all(paths):
+            missing = next(i for i, path in enumerate(paths, start=1) if not path)
+            self.report({"ERROR"}, f"HDR Merge: bracket {missing} is not linked to an image "
+                                   "file; the solve reads the brackets' files")
+            return {"CANCELLED"}
+        options = MergeOptions(merge="linear")
+        try:
+            stack = read_brackets(paths, exposures=node.bracket_exposures())
+            result = merge_stack(stack, options)
+        except HdrioError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        node.set_response(bake_response(
+            result.response, options.weighting,
+            label=f"{result.response.method} from {len(paths)} brackets"))
+        self.report({"INFO"}, f"response solved from {len(paths)} brackets")
+        return {"FINISHED"}
+
+
+class HDRIO_OT_merge_to_exr(bpy.types.Operator):
+    """Merge bracketed images into a scene-linear OpenEXR with hdrio (as `hdrio merge`)
+    and add it to the compositor as an Image node"""
+
+    bl_idname = "hdrio.merge_to_exr"
+    bl_label = "Merge Brackets to EXR"
+    bl_options = {"REGISTER", "UNDO"}
+
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement)  # type: ignore[valid-type]
+    directory: StringProperty(subtype="DIR_PATH")  # type: ignore[valid-type]
+    output: StringProperty(  # type: ignore[valid-type]
+        name="Output", subtype="FILE_PATH",
+        description="EXR to write (default: merged.exr beside the brackets)")
+    filter_image: bpy.props.BoolProperty(default=True, options={"HIDDEN"})  # type: ignore
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        paths = [os.path.join(self.directory, item.name) for item in self.files if item.name]
+        if len(paths) < 2:
+            self.report({"ERROR"}, "select at least two bracketed images")
+            return {"CANCELLED"}
+        output = Path(bpy.path.abspath(self.output) if self.output
+                      else os.path.join(self.directory, "merged.exr"))
+        if output.suffix.lower() != ".exr":
+            self.report({"ERROR"}, f"{output}: the output must be an .exr file")
+            return {"CANCELLED"}
+        try:
+            merge_files(paths, output, options=MergeOptions())
+        except HdrioError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        image = bpy.data.images.load(str(output), check_existing=False)
+        tree = active_compositor_tree(context) or compositor_tree(context.scene)
+        node = tree.nodes.new("CompositorNodeImage")
+        node.image = image
+        self.report({"INFO"}, f"wrote {output}")
+        return {"FINISHED"}
+
+
+class HDRIO_OT_tonemap_local(bpy.types.Operator):
+    """Tone-map a scene-linear image with hdrio's Reinhard 2002 local operator into a new
+    image (display-linear)"""
+
+    bl_idname = "hdrio.tonemap_local"
+    bl_label = "Reinhard Local (hdrio)"
+    bl_options = {"REGISTER", "UNDO"}
+
+    image_name: StringProperty(name="Image")  # type: ignore[valid-type]
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_props_dialog(self)
+
+    def draw(self, context):
+        self.layout.prop_search(self, "image_name", bpy.data, "images")
+
+    def execute(self, context):
+        image = bpy.data.images.get(self.image_name)
+        if image is None:
+            self.report({"ERROR"}, f"no image named {self.image_name!r}")
+            return {"CANCELLED"}
+        width, height = image.size
+        if width * height == 0:
+            self.report({"ERROR"}, f"{image.filepath or image.name}: image has no pixels")
+            return {"CANCELLED"}
+        pixels = np.empty(width * height * 4, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+        rgba = pixels.reshape(height, width, 4)
+        display = TONEMAP_METHODS["reinhard-local"](rgba[..., :3])
+        result = bpy.data.images.new(f"{image.name} Reinhard local", width, height,
+                                     float_buffer=True)
+        out = np.concatenate([display, np.ones_like(display[..., :1])], axis=-1)
+        result.pixels.foreach_set(out.astype(np.float32).reshape(-1))
+        result.update()
+        self.report({"INFO"}, f"tone-mapped {image.name} into {result.name}")
+        return {"FINISHED"}
+
+
+class HDRIO_OT_add_node(bpy.types.Operator):
+    """Add an hdrio node to the compositor"""
+
+    bl_idname = "hdrio.add_node"
+    bl_label = "Add hdrio Node"
+    bl_options = {"REGISTER", "UNDO"}
+
+    node_type: EnumProperty(items=[  # type: ignore[valid-type]
+        ("CompositorNodeHdrioMerge", "HDR Merge", ""),
+        ("CompositorNodeHdrioReinhardGlobal", "Reinhard Global", ""),
+    ])
+
+    def execute(self, context):
+        tree = active_compositor_tree(context) or compositor_tree(context.scene)
+        for node in tree.nodes:
+            node.select = False
+        node = tree.nodes.new(self.node_type)
+        node.select = True
+        tree.nodes.active = node
+        return {"FINISHED"}
+
+
+CLASSES = (HDRIO_OT_solve_response, HDRIO_OT_merge_to_exr, HDRIO_OT_tonemap_local,
+           HDRIO_OT_add_node)

@@ -1,0 +1,155 @@
+"""The extension's operators and the Reinhard Global node on the real ``bpy``.
+
+Run by ``plugins/blender/ci/run_tests.sh``; the main suite has no ``bpy`` and skips this.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip(
+    "bpy", reason="needs Blender's bpy module (bpy 4.5/5.0 need numpy<2): run "
+                  "plugins/blender/ci/run_tests.sh")
+
+from blender_scene import (  # noqa: E402
+    assert_matches_merge,
+    clean_compositor,
+    image_node,
+    merge_node_with,
+    relative_difference,
+    render_to_exr,
+)
+
+import plugins.blender as addon  # noqa: E402
+from hdrio.cli import main as hdrio_main  # noqa: E402
+from hdrio.io.brackets import read_brackets  # noqa: E402
+from hdrio.io.write import write_exr  # noqa: E402
+from hdrio.pipeline import MergeOptions, merge_stack  # noqa: E402
+from hdrio.synthetic import demo_scene  # noqa: E402
+from hdrio.tonemap import TONEMAP_METHODS  # noqa: E402
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered():
+    addon.register()
+    yield
+    addon.unregister()
+
+
+def read_exr(path) -> tuple[np.ndarray, dict]:
+    import OpenImageIO as oiio
+
+    buffer = oiio.ImageBuf(str(path))
+    spec = buffer.spec()
+    attributes = {a.name: spec.getattribute(a.name) for a in spec.extra_attribs}
+    return np.asarray(buffer.get_pixels(oiio.FLOAT)), attributes
+
+
+def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
+    size = (40, 96)
+    paths = write_brackets(size=size)
+    scene = bpy.context.scene
+    tree = clean_compositor(scene)
+    node = merge_node_with(tree, paths)
+    before = node.response_json
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+    assert node.response_json != before
+    merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
+
+    reference = merge_stack(read_brackets(paths), MergeOptions(merge="linear")).radiance
+    assert_matches_merge("solved", merged, reference)
+
+
+def test_merge_node_matches_hdrio_on_real_brackets(shared_data, tmp_path):
+    # Real JPEGs: the solved response has codes no sample fell on (red code 83 here),
+    # which hdrio's merge gives no weight; the node must reproduce these one-code notches.
+    paths = sorted(shared_data("frobisher_001").glob("*.jpg"))
+    scene = bpy.context.scene
+    tree = clean_compositor(scene)
+    node = merge_node_with(tree, paths)
+    assert node.bracket_exposures() == pytest.approx([1 / 8, 1.0, 8.0])  # from EXIF
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+    result = merge_stack(read_brackets(paths), MergeOptions(merge="linear"))
+    assert not np.all(result.response.supported[1:-1])  # the case this test is about
+    merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
+                           result.radiance.shape[:2])
+    assert_matches_merge("frobisher", merged, result.radiance)
+
+
+def test_solve_without_linked_images_reports_an_error():
+    tree = clean_compositor(bpy.context.scene)
+    node = tree.nodes.new("CompositorNodeHdrioMerge")
+    with pytest.raises(RuntimeError, match="bracket 1 is not linked to an image file"):
+        bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name)
+
+
+def test_reinhard_global_node_matches_hdrio(tmp_path):
+    size = (60, 90)
+    radiance = demo_scene(*size)
+    source = write_exr(tmp_path / "scene.exr", radiance, pixel_type="float")
+    scene = bpy.context.scene
+    tree = clean_compositor(scene)
+    node = tree.nodes.new("CompositorNodeHdrioReinhardGlobal")
+    tree.links.new(image_node(tree, source).outputs["Image"], node.inputs["Image"])
+    display = render_to_exr(scene, node.outputs[0], tmp_path / "reinhard.exr", size)
+
+    reference = TONEMAP_METHODS["reinhard-global"](radiance)
+    difference = relative_difference(display, reference)
+    print(f"reinhard: median {np.median(difference):.2e} p99 "
+          f"{np.percentile(difference, 99):.2e}")
+    # The issue's bound; float32 statistics and Blender's luminance path differ from
+    # hdrio's only by rounding, so the median is far below it.
+    assert np.median(difference) <= 0.01
+
+
+def test_merge_to_exr_matches_hdrio_merge_command(shared_data, tmp_path):
+    folder = shared_data("frobisher_001")
+    names = sorted(p.name for p in folder.glob("*.jpg"))
+    assert len(names) == 3, f"expected the 3 Frobisher brackets in {folder}"
+    paths = [str(folder / name) for name in names]
+    cli_output = tmp_path / "cli.exr"
+    assert hdrio_main(["merge", *paths, "-o", str(cli_output), "-q"]) == 0
+
+    blender_output = tmp_path / "blender.exr"
+    tree = clean_compositor(bpy.context.scene)
+    result = bpy.ops.hdrio.merge_to_exr(
+        directory=str(folder), files=[{"name": name} for name in names],
+        output=str(blender_output))
+    assert result == {"FINISHED"}
+    cli_pixels, cli_attributes = read_exr(cli_output)
+    pixels, attributes = read_exr(blender_output)
+    assert np.array_equal(pixels, cli_pixels)
+    # Everything in the header but the time of writing (OpenImageIO stamps DateTime).
+    assert attributes.pop("DateTime") and cli_attributes.pop("DateTime")
+    assert attributes == cli_attributes
+    assert attributes["hdrio:sourceFiles"] == tuple(paths)
+    loaded = [n for n in tree.nodes if n.bl_idname == "CompositorNodeImage"]
+    assert [bpy.path.abspath(n.image.filepath) for n in loaded] == [str(blender_output)]
+
+
+def test_merge_to_exr_reports_bad_input(write_brackets, tmp_path):
+    # Names without exposures, and PNGs without EXIF: nothing gives the exposures.
+    paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
+    with pytest.raises(RuntimeError, match="a.png: no exposure time"):
+        bpy.ops.hdrio.merge_to_exr(
+            directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+            output=str(tmp_path / "out.exr"))
+    assert not (tmp_path / "out.exr").exists()
+
+
+def test_tonemap_local_operator_matches_hdrio(tmp_path):
+    radiance = demo_scene(48, 64)
+    source = write_exr(tmp_path / "scene.exr", radiance, pixel_type="float")
+    image = bpy.data.images.load(str(source), check_existing=False)
+    assert bpy.ops.hdrio.tonemap_local(image_name=image.name) == {"FINISHED"}
+    result = bpy.data.images[f"{image.name} Reinhard local"]
+    pixels = np.empty(64 * 48 * 4, dtype=np.float32)
+    result.pixels.foreach_get(pixels)
+    # Blender stores rows bottom-up.
+    display = pixels.reshape(48, 64, 4)[::-1, :, :3]
+    reference = TONEMAP_METHODS["reinhard-local"](radiance)
+    # Same function on the same float32 pixels: only float32 rounding may differ.
+    assert np.allclose(display, reference, rtol=1e-5, atol=1e-6)
