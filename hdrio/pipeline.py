@@ -8,13 +8,16 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from hdrio import __version__
+from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
+from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
+from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
 from hdrio.io.brackets import read_brackets
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
@@ -40,7 +43,14 @@ class MergeOptions:
     merge: str = "log"
     exclude_colour: tuple[int, ...] | None = None
     seed: int = 0
+    # colour-science name of the radiance's primaries: set from the input encoding.
     colourspace: str = DEFAULT_SPACE
+    # Colour management (hdrio.cms): see docs/colour.md.
+    input_encoding: str | None = None  # when the files do not say; None: sRGB
+    output_space: str = DEFAULT_WORKING_SPACE  # OpenColorIO name of the EXR's space
+    ocio_config: str | None = None  # path or ocio:// URI; None: $OCIO, else built-in
+    calibration: Calibration | None = None  # None: relative radiance
+    white_balance: Region | None = None  # neutral region x, y, w, h; None: camera's
 
 
 @dataclass
@@ -52,6 +62,7 @@ class MergeResult:
     options: MergeOptions
     timings: dict[str, float] = field(default_factory=dict)
     exposure_scale: float = 1.0
+    colour: ColourState | None = None
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -90,7 +101,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     say(f"merging {stack.count} brackets ({options.merge} domain)")
     radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting)
     timings["merge"] = time.perf_counter() - start
-    return MergeResult(stack, response, radiance, statistics, options, timings)
+    radiance, colour = colour_stage(
+        stack, response, radiance, input_encoding=options.input_encoding,
+        white_balance=options.white_balance, calibration=options.calibration)
+    options = replace(options, colourspace=colour.encoding.colour_science)
+    return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -131,6 +146,9 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     }
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
+    if result.colour is not None:
+        attributes.update(colour_attributes(result.colour, options.output_space,
+                                            options.ocio_config, result.exposure_scale))
     names = "RGB" if response.channels == 3 else "Y"
     supported = []
     for c, name in enumerate(names[: response.channels]):
@@ -165,6 +183,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 read_progress: Callable[[int, int, str], None] | None = None) -> MergeResult:
     """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically."""
     say = progress or (lambda message: None)
+    require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
     start = time.perf_counter()
     say(f"reading {len(paths)} brackets")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
@@ -173,10 +192,14 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     result = merge_stack(stack, options, progress)
     result.timings["read"] = read_time
     start = time.perf_counter()
+    radiance = result.radiance
+    if result.colour is not None:
+        radiance = output_radiance(radiance, result.colour, options.output_space,
+                                   options.ocio_config)
     if pixel_type == "half":
-        result.exposure_scale = half_safe_scale(result.radiance)
-    radiance = (result.radiance if result.exposure_scale == 1.0
-                else result.radiance * np.float32(result.exposure_scale))
+        result.exposure_scale = half_safe_scale(radiance)
+    if result.exposure_scale != 1.0:
+        radiance = radiance * np.float32(result.exposure_scale)
     say(f"writing {output}")
     write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type)
     result.timings["write"] = time.perf_counter() - start

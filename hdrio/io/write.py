@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +25,18 @@ class OutputError(HdrioError):
     """An output could not be written (the message names the file)."""
 
 
+@dataclass(frozen=True)
+class Float2:
+    """Two floats stored as an EXR ``v2f`` vector (e.g. ``adoptedNeutral``), not a list."""
+
+    x: float
+    y: float
+
+
 def _type_of(value) -> tuple[str, object]:
     """The OpenImageIO type name and value for an attribute (scalars, strings, arrays)."""
+    if isinstance(value, Float2):
+        return "float2", (float(value.x), float(value.y))
     if isinstance(value, bool):
         return "int", int(value)
     if isinstance(value, int | np.integer):
