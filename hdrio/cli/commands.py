@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.cli.colour import add_colour_options, colour_fields
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import MERGE_METHODS
@@ -59,7 +60,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         weighting=WEIGHTING_METHODS.canonical(args.weighting),
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
-        seed=args.seed,
+        seed=args.seed, **colour_fields(args),
     )
 
 
@@ -85,6 +86,7 @@ def add_merge(sub) -> None:
                         help="EXR pixel type (default %(default)s)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     _add_merge_options(parser)
+    add_colour_options(parser)
     parser.set_defaults(run=run_merge)
 
 
