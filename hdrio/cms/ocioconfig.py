@@ -82,8 +82,7 @@ def srgb_encoded_to_reference():
     import PyOpenColorIO as ocio
 
     curve = ocio.ExponentWithLinearTransform(
-        gamma=[2.4, 2.4, 2.4, 1.0], offset=[0.055, 0.055, 0.055, 0.0],
-        direction=ocio.TRANSFORM_DIR_INVERSE)
+        gamma=[2.4, 2.4, 2.4, 1.0], offset=[0.055, 0.055, 0.055, 0.0])  # forward: decode
     return ocio.GroupTransform([curve, matrix_transform(to_aces_matrix("ITU-R BT.709"))])
 
 
