@@ -119,6 +119,9 @@ def run_merge(args: argparse.Namespace) -> int:
         progress=progress.step, read_progress=progress.bar,
     )
     print(summary(result, output, preview, args.tonemap, args.data_type))
+    from hdrio.cms.checks import check_exr, format_report
+
+    print(format_report(check_exr(output)))  # the written file, as a reader will see it
     return 0
 
 
