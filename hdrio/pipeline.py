@@ -15,6 +15,7 @@ import numpy as np
 
 from hdrio import __version__
 from hdrio.cms.calibration import Calibration, Region
+from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
@@ -67,10 +68,7 @@ class MergeResult:
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
         """``(full, robust)``: log2 of max/min luminance, and of its 99.9/0.1 percentiles."""
-        L = luminance(self.radiance, self.options.colourspace)
-        L = L[L > 0]
-        low, high = np.percentile(L, [0.1, 99.9])
-        return float(np.log2(L.max() / L.min())), float(np.log2(high / low))
+        return dynamic_range_stops(luminance(self.radiance, self.options.colourspace))
 
 
 def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.ndarray | None:
