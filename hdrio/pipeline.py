@@ -25,6 +25,7 @@ from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
 from hdrio.response import RESPONSE_METHODS, CameraResponse
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
+from hdrio.tonemap.display import preview_OCIO_display
 
 Progress = Callable[[str], None]
 
@@ -178,8 +179,13 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 exposures_from: str | Path | None = None,
                 options: MergeOptions = MergeOptions(), pixel_type: str = "half",
                 progress: Progress | None = None,
-                read_progress: Callable[[int, int, str], None] | None = None) -> MergeResult:
-    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically."""
+                read_progress: Callable[[int, int, str], None] | None = None,
+                display_view: tuple[str, str] | None = None) -> MergeResult:
+    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+
+    ``display_view``: render the preview through that OCIO display and view instead of
+    the ``tonemap`` operator.
+    """
     say = progress or (lambda message: None)
     require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
     start = time.perf_counter()
@@ -203,7 +209,14 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()
-        say(f"tone mapping preview ({tonemap})")
-        write_preview(preview, render_preview(result.radiance, tonemap, options.colourspace))
+        if display_view is not None and result.colour is not None:
+            say(f"rendering preview ({' / '.join(display_view)})")
+            pixels = preview_OCIO_display(
+                result.radiance, result.colour.encoding.linear_interop_id, *display_view,
+                colourspace=options.colourspace, config=options.ocio_config)
+        else:
+            say(f"tone mapping preview ({tonemap})")
+            pixels = render_preview(result.radiance, tonemap, options.colourspace)
+        write_preview(preview, pixels)
         result.timings["preview"] = time.perf_counter() - start
     return result

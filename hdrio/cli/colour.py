@@ -44,6 +44,34 @@ def add_colour_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--reference-illuminance", type=float, metavar="LUX")
     group.add_argument("--reference-reflectance", type=float, default=0.18, metavar="R",
                        help="grey card reflectance (default %(default)g)")
+    group.add_argument("--ocio-display", metavar="DISPLAY",
+                       help="render the preview through this OCIO display (e.g. 'sRGB - "
+                            "Display') instead of --tonemap")
+    group.add_argument("--ocio-view", metavar="VIEW",
+                       help="view of --ocio-display (default: the display's first view, "
+                            "e.g. 'ACES 2.0 - SDR 100 nits (Rec.709)')")
+
+
+def display_view_from(args: argparse.Namespace) -> tuple[str, str] | None:
+    """``(display, view)`` for the preview, checked against the config, or ``None``."""
+    from hdrio.cms.spaces import config_source, load_config
+    from hdrio.errors import HdrioError
+
+    if not args.ocio_display:
+        if args.ocio_view:
+            raise HdrioError("--ocio-view needs --ocio-display")
+        return None
+    config = load_config(args.ocio_config)
+    displays = list(config.getDisplays())
+    if args.ocio_display not in displays:
+        raise HdrioError(f"{config_source(args.ocio_config)}: no display "
+                         f"{args.ocio_display!r}; choose from {', '.join(displays)}")
+    views = list(config.getViews(args.ocio_display))
+    view = args.ocio_view or config.getDefaultView(args.ocio_display)
+    if view not in views:
+        raise HdrioError(f"display {args.ocio_display!r} has no view {view!r}; choose from "
+                         f"{', '.join(views)}")
+    return args.ocio_display, view
 
 
 def colour_fields(args: argparse.Namespace) -> dict[str, object]:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.cli.colour import add_colour_options, colour_fields
+from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import MERGE_METHODS
@@ -111,14 +111,17 @@ def run_merge(args: argparse.Namespace) -> int:
     _check_outputs(output, preview, args.images)
     TONEMAP_METHODS.canonical(args.tonemap)
     options = options_from(args)
+    display_view = display_view_from(args)
     progress = Progress(quiet=args.quiet)
     result = merge_files(
         args.images, output, preview=preview, tonemap=args.tonemap,
         exposures=args.exposures.split(",") if args.exposures else None,
         exposures_from=args.exposures_from, options=options, pixel_type=args.data_type,
         progress=progress.step, read_progress=progress.bar,
+        display_view=display_view,
     )
-    print(summary(result, output, preview, args.tonemap, args.data_type))
+    label = " / ".join(display_view) if display_view else args.tonemap
+    print(summary(result, output, preview, label, args.data_type))
     from hdrio.cms.checks import check_exr, format_report
 
     print(format_report(check_exr(output)))  # the written file, as a reader will see it
