@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import colour
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from hdrio.cli import main
@@ -94,3 +95,23 @@ def test_hdrio_check_command(tmp_path, capsys):
     assert mean < 0.5
     assert main(["check", str(tmp_path / "missing.exr")]) == 2
     assert "missing.exr: no such file" in capsys.readouterr().err
+
+
+def test_frobisher_colorchecker_delta_e(shared_data, tmp_path):
+    from hdrio.pipeline import merge_files
+
+    files = sorted(shared_data("frobisher_001").glob("IMG_26*.jpg"))
+    path = tmp_path / "frobisher.exr"
+    merge_files(files, path)
+    chart = (404, 212, 37, 23)  # the Passport's 24-patch half: about 6 x 6 pixels a patch
+    mean = float(np.mean(check_exr(path, chart=chart).delta_E))
+    # A camera JPEG's rendering of a tiny chart under room light: measured 7.3. The same
+    # patches read in the wrong order (chart mirrored) give about 40, so 12 separates a
+    # correctly read chart from a misread one.
+    assert mean < 12.0
+    image = oiio.ImageInput.open(str(path))
+    mirrored = np.asarray(image.read_image("float"))[:, ::-1]
+    image.close()
+    width = mirrored.shape[1]
+    wrong = check_pixels(mirrored, chart=(width - 404 - 37, 212, 37, 23)).delta_E
+    assert float(np.mean(wrong)) > 25.0
