@@ -8,19 +8,24 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from hdrio import __version__
+from hdrio.cms.calibration import Calibration, Region
+from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
+from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
+from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
 from hdrio.io.brackets import read_brackets
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
 from hdrio.response import RESPONSE_METHODS, CameraResponse
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
+from hdrio.tonemap.display import preview_OCIO_display
 
 Progress = Callable[[str], None]
 
@@ -43,7 +48,14 @@ class MergeOptions:
     saturation: str = "channel"
     exclude_colour: tuple[int, ...] | None = None
     seed: int = 0
+    # colour-science name of the radiance's primaries: set from the input encoding.
     colourspace: str = DEFAULT_SPACE
+    # Colour management (hdrio.cms): see docs/colour.md.
+    input_encoding: str | None = None  # when the files do not say; None: sRGB
+    output_space: str = DEFAULT_WORKING_SPACE  # OpenColorIO name of the EXR's space
+    ocio_config: str | None = None  # path or ocio:// URI; None: $OCIO, else built-in
+    calibration: Calibration | None = None  # None: relative radiance
+    white_balance: Region | None = None  # neutral region x, y, w, h; None: camera's
 
 
 @dataclass
@@ -55,14 +67,12 @@ class MergeResult:
     options: MergeOptions
     timings: dict[str, float] = field(default_factory=dict)
     exposure_scale: float = 1.0
+    colour: ColourState | None = None
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
         """``(full, robust)``: log2 of max/min luminance, and of its 99.9/0.1 percentiles."""
-        L = luminance(self.radiance, self.options.colourspace)
-        L = L[L > 0]
-        low, high = np.percentile(L, [0.1, 99.9])
-        return float(np.log2(L.max() / L.min())), float(np.log2(high / low))
+        return dynamic_range_stops(luminance(self.radiance, self.options.colourspace))
 
 
 def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.ndarray | None:
@@ -94,7 +104,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting,
                                                          options.saturation)
     timings["merge"] = time.perf_counter() - start
-    return MergeResult(stack, response, radiance, statistics, options, timings)
+    radiance, colour = colour_stage(
+        stack, response, radiance, input_encoding=options.input_encoding,
+        white_balance=options.white_balance, calibration=options.calibration)
+    options = replace(options, colourspace=colour.encoding.colour_science)
+    return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -136,6 +150,9 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     }
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
+    if result.colour is not None:
+        attributes.update(colour_attributes(result.colour, options.output_space,
+                                            options.ocio_config, result.exposure_scale))
     names = "RGB" if response.channels == 3 else "Y"
     supported = []
     for c, name in enumerate(names[: response.channels]):
@@ -167,9 +184,15 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 exposures_from: str | Path | None = None,
                 options: MergeOptions = MergeOptions(), pixel_type: str = "half",
                 progress: Progress | None = None,
-                read_progress: Callable[[int, int, str], None] | None = None) -> MergeResult:
-    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically."""
+                read_progress: Callable[[int, int, str], None] | None = None,
+                display_view: tuple[str, str] | None = None) -> MergeResult:
+    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+
+    ``display_view``: render the preview through that OCIO display and view instead of
+    the ``tonemap`` operator.
+    """
     say = progress or (lambda message: None)
+    require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
     start = time.perf_counter()
     say(f"reading {len(paths)} brackets")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
@@ -178,15 +201,26 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     result = merge_stack(stack, options, progress)
     result.timings["read"] = read_time
     start = time.perf_counter()
+    radiance = result.radiance
+    if result.colour is not None:
+        radiance = output_radiance(radiance, result.colour, options.output_space,
+                                   options.ocio_config)
     if pixel_type == "half":
-        result.exposure_scale = half_safe_scale(result.radiance)
+        result.exposure_scale = half_safe_scale(radiance)
     say(f"writing {output}")
-    write_exr(output, result.radiance, exr_attributes(result), pixel_type=pixel_type,
+    write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type,
               scale=result.exposure_scale)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()
-        say(f"tone mapping preview ({tonemap})")
-        write_preview(preview, render_preview(result.radiance, tonemap, options.colourspace))
+        if display_view is not None and result.colour is not None:
+            say(f"rendering preview ({' / '.join(display_view)})")
+            pixels = preview_OCIO_display(
+                result.radiance, result.colour.encoding.linear_interop_id, *display_view,
+                colourspace=options.colourspace, config=options.ocio_config)
+        else:
+            say(f"tone mapping preview ({tonemap})")
+            pixels = render_preview(result.radiance, tonemap, options.colourspace)
+        write_preview(preview, pixels)
         result.timings["preview"] = time.perf_counter() - start
     return result

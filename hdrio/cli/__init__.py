@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from hdrio import __version__
-from hdrio.cli import commands
+from hdrio.cli import colour, commands
 from hdrio.errors import HdrioError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -23,6 +23,8 @@ def build_parser() -> argparse.ArgumentParser:
     commands.add_merge(sub)
     commands.add_info(sub)
     commands.add_demo(sub)
+    colour.add_check(sub)
+    colour.add_export_response(sub)
     return parser
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import MERGE_METHODS, SATURATION_POLICIES
@@ -64,7 +65,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         weighting=WEIGHTING_METHODS.canonical(args.weighting),
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
-        seed=args.seed, saturation=args.saturation,
+        seed=args.seed, saturation=args.saturation, **colour_fields(args),
     )
 
 
@@ -90,6 +91,7 @@ def add_merge(sub) -> None:
                         help="EXR pixel type (default %(default)s)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     _add_merge_options(parser)
+    add_colour_options(parser)
     parser.set_defaults(run=run_merge)
 
 
@@ -114,14 +116,20 @@ def run_merge(args: argparse.Namespace) -> int:
     _check_outputs(output, preview, args.images)
     TONEMAP_METHODS.canonical(args.tonemap)
     options = options_from(args)
+    display_view = display_view_from(args)
     progress = Progress(quiet=args.quiet)
     result = merge_files(
         args.images, output, preview=preview, tonemap=args.tonemap,
         exposures=args.exposures.split(",") if args.exposures else None,
         exposures_from=args.exposures_from, options=options, pixel_type=args.data_type,
         progress=progress.step, read_progress=progress.bar,
+        display_view=display_view,
     )
-    print(summary(result, output, preview, args.tonemap, args.data_type))
+    label = " / ".join(display_view) if display_view else args.tonemap
+    print(summary(result, output, preview, label, args.data_type))
+    from hdrio.cms.checks import check_exr, format_report
+
+    print(format_report(check_exr(output)))  # the written file, as a reader will see it
     return 0
 
 

@@ -100,6 +100,9 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
                 "ISO": spec.getattribute("Exif:PhotographicSensitivity")
                 or spec.getattribute("Exif:ISOSpeedRatings"),
                 "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
+                # The input encoding (hdrio.cms.encoding): ICC description, EXIF ColorSpace.
+                "ICCDescription": spec.getattribute("ICCProfile:profile_description"),
+                "ExifColorSpace": spec.getattribute("Exif:ColorSpace"),
             }
             header = BracketHeader(
                 path, spec.height, spec.width, 3 if spec.nchannels >= 3 else 1, code_max,
@@ -132,7 +135,8 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
 
     Only 8- and 16-bit integer encodings are brackets; alpha and extra channels are
     dropped (RGB or a single grey channel are kept). ``exif`` holds ``ExposureTime``,
-    ``FNumber``, ``ISO`` and ``DateTimeOriginal`` where the file has them.
+    ``FNumber``, ``ISO``, ``DateTimeOriginal``, ``ICCDescription`` and ``ExifColorSpace``
+    where the file has them.
     """
     path = Path(path)
     with _open(path) as (image, header):

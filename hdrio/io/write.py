@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +25,18 @@ class OutputError(HdrioError):
     """An output could not be written (the message names the file)."""
 
 
+@dataclass(frozen=True)
+class Float2:
+    """Two floats stored as an EXR ``v2f`` vector (e.g. ``adoptedNeutral``), not a list."""
+
+    x: float
+    y: float
+
+
 def _type_of(value) -> tuple[str, object]:
     """The OpenImageIO type name and value for an attribute (scalars, strings, arrays)."""
+    if isinstance(value, Float2):
+        return "float2", (float(value.x), float(value.y))
     if isinstance(value, bool):
         return "int", int(value)
     if isinstance(value, int | np.integer):
@@ -54,6 +65,11 @@ def _type_of(value) -> tuple[str, object]:
 _ROWS_PER_WRITE = 64
 
 
+def _temporary_beside(path: Path) -> Path:
+    """A hidden temporary name in ``path``'s folder (same file system: rename is atomic)."""
+    return path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+
+
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
                 band: Callable[[np.ndarray], np.ndarray] | None = None) -> Path:
@@ -72,7 +88,7 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     for name, value in (attributes or {}).items():
         type_name, stored = _type_of(value)
         spec.attribute(name, oiio.TypeDesc(type_name), stored)
-    temp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+    temp = _temporary_beside(path)
     try:
         output = oiio.ImageOutput.create(str(temp))
         if output is None:
@@ -123,3 +139,20 @@ def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:
     """Write display-referred RGB in [0, 1] (already encoded) as an 8-bit image."""
     codes = np.round(np.clip(display_rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
     return write_image(path, codes, "uint8")
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write a UTF-8 text file (an OCIO config, a LUT) atomically."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise OutputError(f"{path}: folder {path.parent} does not exist")
+    temp = _temporary_beside(path)
+    try:
+        temp.write_text(text, encoding="utf-8")
+        os.replace(temp, path)
+    except OSError as error:
+        raise OutputError(f"{path}: write failed ({error.strerror})") from None
+    finally:
+        if temp.exists():
+            temp.unlink()
+    return path

@@ -1,0 +1,85 @@
+"""Input encodings of brackets: which RGB primaries the linearised code values have.
+
+The recovered camera response linearises code values (no fixed transfer function is
+assumed); the primaries and white of the result are those of the encoding the camera
+wrote: sRGB (Rec.709 primaries, D65), Adobe RGB (1998) or Display P3. The encoding is
+taken from the file where it says (the ICC profile's description, else the EXIF
+``ColorSpace`` tag, 1 = sRGB), else from the caller's choice, else sRGB.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from hdrio.errors import InputError
+
+
+@dataclass(frozen=True)
+class Encoding:
+    """An input encoding: its colour-science colourspace and OCIO interop ID when linear."""
+
+    name: str
+    colour_science: str
+    linear_interop_id: str
+
+
+ENCODINGS: dict[str, Encoding] = {
+    "sRGB": Encoding("sRGB", "ITU-R BT.709", "lin_rec709_scene"),
+    "Adobe RGB (1998)": Encoding("Adobe RGB (1998)", "Adobe RGB (1998)", "lin_adobergb_scene"),
+    "Display P3": Encoding("Display P3", "Display P3", "lin_p3d65_scene"),
+}
+DEFAULT_ENCODING = "sRGB"
+
+# Lower-case fragments of ICC profile descriptions, most specific first.
+_ICC_MARKERS = (("adobe rgb", "Adobe RGB (1998)"), ("adobergb", "Adobe RGB (1998)"),
+                ("display p3", "Display P3"), ("p3", "Display P3"), ("srgb", "sRGB"),
+                ("iec61966-2", "sRGB"))
+_ALIASES = {"srgb": "sRGB", "rec709": "sRGB", "adobergb": "Adobe RGB (1998)",
+            "adobergb1998": "Adobe RGB (1998)", "adobe": "Adobe RGB (1998)",
+            "displayp3": "Display P3", "p3": "Display P3", "p3d65": "Display P3"}
+
+
+def encoding(name: str) -> Encoding:
+    """The encoding called ``name`` (case, spaces, ``-``, ``(1998)`` ignored)."""
+    key = "".join(ch for ch in name.lower() if ch.isalnum())
+    canonical = _ALIASES.get(key) or _ALIASES.get(key.replace("1998", ""))
+    if canonical is None:
+        raise KeyError(f"unknown input encoding {name!r}; choose from {', '.join(ENCODINGS)}")
+    return ENCODINGS[canonical]
+
+
+def encoding_from_metadata(metadata: Mapping[str, object]) -> tuple[str, str] | None:
+    """``(encoding name, evidence)`` from one file's metadata, or ``None`` if it is silent.
+
+    ``metadata`` holds ``ICCDescription`` and ``ExifColorSpace`` as read by
+    :func:`hdrio.io.brackets.read_codes`.
+    """
+    description = str(metadata.get("ICCDescription") or "")
+    lowered = description.lower()
+    for marker, name in _ICC_MARKERS:
+        if marker in lowered:
+            return name, f"ICC profile {description!r}"
+    if metadata.get("ExifColorSpace") == 1:
+        return "sRGB", "EXIF ColorSpace 1"
+    return None
+
+
+def resolve_encoding(files: Sequence[str], metadata: Sequence[Mapping[str, object]],
+                     fallback: str | None = None) -> tuple[Encoding, str]:
+    """The stack's encoding and where it came from: file metadata, else ``fallback``.
+
+    Raises :class:`InputError` naming the file when brackets declare different encodings.
+    """
+    found = [(name, encoding_from_metadata(entry)) for name, entry in zip(files, metadata)]
+    declared = [(name, hit) for name, hit in found if hit is not None]
+    if declared:
+        first_file, (first, evidence) = declared[0]
+        for name, (other, _) in declared[1:]:
+            if other != first:
+                raise InputError(name, f"is {other} but {first_file} is {first}: brackets "
+                                       "must share one encoding")
+        return ENCODINGS[first], evidence
+    if fallback:
+        return encoding(fallback), "option"
+    return ENCODINGS[DEFAULT_ENCODING], "default"
