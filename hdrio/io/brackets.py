@@ -20,6 +20,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
+from hdrio.io.raw import is_raw, read_raw_set
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
@@ -110,7 +111,8 @@ def read_brackets(
     Parameters
     ----------
     paths
-        Image files (8- or 16-bit JPEG, PNG, TIFF, or anything OpenImageIO reads).
+        Image files (8- or 16-bit JPEG, PNG, TIFF, or anything OpenImageIO reads), or
+        camera RAW files (all of them; see :mod:`hdrio.io.raw`).
     exposures
         Exposure times in seconds (``"1/60"`` strings allowed), one per path: wins over
         every other source.
@@ -126,11 +128,18 @@ def read_brackets(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("<no input>", "no images given")
-    decoded = []
-    for done, path in enumerate(paths, start=1):
-        decoded.append(read_codes(path))
-        if progress:
-            progress(done, len(paths), str(path))
+    raw = [is_raw(path) for path in paths]
+    if any(raw) and not all(raw):
+        raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "
+                                                        "be merged together; use one kind")
+    if all(raw):
+        decoded = read_raw_set(paths, progress=progress)
+    else:
+        decoded = []
+        for done, path in enumerate(paths, start=1):
+            decoded.append(read_codes(path))
+            if progress:
+                progress(done, len(paths), str(path))
     first_codes, code_max, _ = decoded[0]
     for path, (codes, this_max, _) in zip(paths, decoded):
         if codes.shape != first_codes.shape or this_max != code_max:
