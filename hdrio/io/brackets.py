@@ -20,7 +20,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
-from hdrio.io.raw import is_raw, read_raw_set
+from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
@@ -82,17 +82,41 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
                 raise InputError(
                     path, f"cannot decode image ({_first_line(image.geterror()) or 'read failed'})"
                 )
-            exif = {
-                "ExposureTime": spec.getattribute("ExposureTime"),
-                "FNumber": spec.getattribute("FNumber"),
-                "ISO": spec.getattribute("Exif:PhotographicSensitivity")
-                or spec.getattribute("Exif:ISOSpeedRatings"),
-                "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
-            }
+            exif = _exif_of(spec)
         finally:
             image.close()
     codes = np.asarray(pixels, dtype=dtype).reshape(spec.height, spec.width, channels)
-    return codes, code_max, {key: value for key, value in exif.items() if value is not None}
+    return codes, code_max, exif
+
+
+def _exif_of(spec) -> dict:
+    exif = {
+        "ExposureTime": spec.getattribute("ExposureTime"),
+        "FNumber": spec.getattribute("FNumber"),
+        "ISO": spec.getattribute("Exif:PhotographicSensitivity")
+        or spec.getattribute("Exif:ISOSpeedRatings"),
+        "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
+    }
+    return {key: value for key, value in exif.items() if value is not None}
+
+
+def read_exif(path: str | Path) -> dict:
+    """The EXIF fields :func:`read_codes` returns, from the header alone (RAW included)."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    if is_raw(path):
+        return raw_exif(path)
+    if not path.is_file():
+        raise InputError(path, "no such file")
+    with _quiet_native_stderr():
+        image = oiio.ImageInput.open(str(path))
+        if image is None:
+            raise InputError(path, f"cannot read image ({_first_line(oiio.geterror())})")
+        try:
+            return _exif_of(image.spec())
+        finally:
+            image.close()
 
 
 def _first_line(message: str) -> str:

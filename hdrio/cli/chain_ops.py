@@ -1,0 +1,385 @@
+"""The chain's operations, one registered function each (see :func:`chain.operation`).
+
+To add one (a colour operation, say), write::
+
+    @operation("--colorspace", "NAME", help="...", example="--colorspace ACEScg",
+               convert=lambda values: values[0])
+    def _colorspace(chain: Chain, name: str) -> None:
+        image = chain.top()
+        image.pixels = some_core_function(image.pixels, name)
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from hdrio.cli.chain import (
+    FLOAT_SUFFIXES,
+    IMAGE_SUFFIXES,
+    Chain,
+    ChainError,
+    Image,
+    Step,
+    operation,
+)
+from hdrio.cli.chain_batch import print_plan, run_groups  # noqa: F401  (used by chain.py)
+from hdrio.cli.commands import _check_outputs
+from hdrio.errors import HdrioError
+
+_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
+_FIELD = re.compile(r"{(\w+)}")
+
+
+def _one(values: list[str]) -> str:
+    return values[0]
+
+
+def _number(values: list[str]) -> float:
+    try:
+        return float(values[0])
+    except ValueError:
+        raise ValueError(f"not a number: {values[0]!r}") from None
+
+
+def _pattern_free(path: Path) -> bool:
+    return not _FIELD.search(str(path))
+
+
+# ----------------------------------------------------------------------------- inputs
+
+
+def read_input(chain: Chain, path: Path) -> None:
+    """A positional input: brackets wait for --merge; float images go on the stack."""
+    from hdrio.grouping import list_images
+
+    if path.is_dir():
+        files = list_images(path)
+        if not files:
+            raise ChainError(f"{path}: folder holds no images")
+        chain.brackets.extend(files)
+        chain.inputs.extend(files)
+        return
+    chain.inputs.append(path)
+    if path.suffix.lower() in FLOAT_SUFFIXES:
+        from hdrio.imageops import read_image
+
+        pixels, attributes = read_image(path)
+        scale = float(attributes.get("hdrio:exposureScale", 1.0))
+        chain.images.append(Image(pixels, attributes, str(path), scale=scale))
+    else:
+        chain.brackets.append(path)
+
+
+@operation("--exposures", "LIST", help="exposure times (s) of the pending brackets, in order",
+           example="a.jpg b.jpg c.jpg --exposures 1/8,1,8 --merge",
+           convert=lambda values: values[0].split(","))
+def _exposures(chain: Chain, times: list[str]) -> None:
+    chain.settings["exposures"] = times
+
+
+@operation("--exposures-from", "FILE",
+           help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV list.txt",
+           example="church_*.png --exposures-from exposures.csv --merge", convert=_one)
+def _exposures_from(chain: Chain, path: str) -> None:
+    chain.settings["exposures_from"] = path
+
+
+def _response_name(values: list[str]) -> str:
+    from hdrio.response import RESPONSE_METHODS
+
+    return RESPONSE_METHODS.canonical(values[0])
+
+
+@operation("--response", "METHOD", convert=_response_name,
+           help="camera response for the next --merge: Debevec1997 (solved; the default) or "
+                "linear (RAW and linear TIFF need no solve; RAW always uses it)",
+           example="a.tif b.tif c.tif --response linear --merge")
+def _response(chain: Chain, method: str) -> None:
+    chain.settings["response"] = method
+    chain.settings.pop("response_from", None)
+
+
+@operation("--response-from", "EXR", convert=_one,
+           help="reuse the response stored in an EXR hdrio wrote (no solve)",
+           example="d.jpg e.jpg f.jpg --response-from earlier.exr --merge")
+def _response_from(chain: Chain, path: str) -> None:
+    from hdrio.response.stored import read_response
+
+    chain.settings["response_from"] = read_response(path)
+
+
+# ------------------------------------------------------------------------------ merge
+
+
+def _merge_domain(token: str) -> bool:
+    from hdrio.merge import MERGE_METHODS
+
+    try:
+        MERGE_METHODS.canonical(token)
+    except KeyError:
+        return False
+    return True
+
+
+def _merge_options(values: list[str]) -> str:
+    from hdrio.merge import MERGE_METHODS
+
+    return MERGE_METHODS.canonical(values[0]) if values else "log"
+
+
+@operation("--merge", optional="DOMAIN", accepts_optional=_merge_domain, convert=_merge_options,
+           help="merge the pending brackets into scene-linear radiance (domain: log, the "
+                "default, or linear)",
+           example="a.jpg b.jpg c.jpg --merge linear -o out.exr")
+def _merge(chain: Chain, domain: str) -> None:
+    from hdrio.io.brackets import read_brackets
+    from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
+
+    if not chain.brackets:
+        raise ChainError("no brackets to merge: give the bracket files before --merge")
+    settings = chain.settings
+    stack = read_brackets(chain.brackets, exposures=settings.pop("exposures", None),
+                          exposures_from=settings.pop("exposures_from", None),
+                          progress=chain.progress.bar)
+    options = MergeOptions(response=settings.get("response", "Debevec1997"), merge=domain)
+    result = merge_stack(stack, options, chain.progress.step,
+                         response=settings.get("response_from"))
+    chain.brackets = []
+    chain.last_merge = result
+    chain.images.append(Image(result.radiance, exr_attributes(result),
+                              f"merge of {stack.count} brackets"))
+
+
+# ------------------------------------------------------------------------ image steps
+
+
+@operation("--exposure", "STOPS", convert=_number,
+           help="scale the scene-linear image by 2^STOPS", example="--exposure -1.5")
+def _exposure(chain: Chain, stops: float) -> None:
+    from hdrio.imageops import apply_exposure
+
+    image = chain.top()
+    if image.display:
+        raise ChainError("the image is display-referred; change exposure before --tonemap")
+    image.pixels = apply_exposure(image.pixels, stops)
+    image.scale *= 2.0**stops
+
+
+def _tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
+    from hdrio.tonemap import TONEMAP_METHODS
+
+    name = TONEMAP_METHODS.canonical(values[0])
+    parameters: dict[str, float] = {}
+    for item in values[1].split(",") if len(values) > 1 else []:
+        key, _, text = item.partition("=")
+        try:
+            parameters[key.strip()] = float(text)
+        except ValueError:
+            raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
+    return name, parameters
+
+
+@operation("--tonemap", "OPERATOR", optional="NAME=VALUE,...", convert=_tonemap_arguments,
+           accepts_optional=lambda token: "=" in token and not token.startswith("-"),
+           help="tone-map to a display image (sRGB): reinhard-global, reinhard-local, "
+                "their -tutorial variants; optional operator parameters",
+           example="--tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
+def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
+    from hdrio.pipeline import render_preview
+
+    name, parameters = value
+    image = chain.top()
+    if image.display:
+        raise ChainError("the image is already tone-mapped")
+    try:
+        image.pixels = render_preview(image.pixels, name, **parameters)
+    except TypeError:
+        raise ChainError(f"{name} takes no parameter {', '.join(parameters)}") from None
+    image.display = True
+
+
+def _size(values: list[str]) -> str:
+    if not re.fullmatch(r"\d+(\.\d+)?%|\d+x\d+", values[0]):
+        raise ValueError("size must be WIDTHxHEIGHT (0 keeps the aspect) or a percentage")
+    return values[0]
+
+
+@operation("--resize", "SIZE", convert=_size,
+           help="resample to WIDTHxHEIGHT (a 0 keeps the aspect ratio) or to N%",
+           example="--resize 1024x0")
+def _resize(chain: Chain, size: str) -> None:
+    from hdrio.imageops import resize
+
+    image = chain.top()
+    height, width = image.pixels.shape[:2]
+    if size.endswith("%"):
+        factor = float(size[:-1]) / 100.0
+        new_width, new_height = round(width * factor), round(height * factor)
+    else:
+        new_width, new_height = (int(v) for v in size.split("x"))
+        if new_width == 0 and new_height == 0:
+            raise ChainError("at most one of width and height may be 0")
+        new_width = new_width or round(width * new_height / height)
+        new_height = new_height or round(height * new_width / width)
+    image.pixels = resize(image.pixels, max(1, new_width), max(1, new_height))
+
+
+# ----------------------------------------------------------------------------- output
+
+
+@operation("-d", "TYPE", convert=_one,
+           help="pixel type of the following EXR outputs: half (default) or float",
+           example="-d float -o out.exr")
+def _data_type(chain: Chain, value: str) -> None:
+    if value not in ("half", "float"):
+        raise ChainError(f"{value!r}: choose half or float")
+    chain.settings["data_type"] = value
+
+
+@operation("--compression", "NAME", convert=_one,
+           help=f"compression of the following EXR outputs: {', '.join(_COMPRESSIONS)} "
+                "(default zip; dwaa:45 sets a level)",
+           example="--compression piz -o out.exr")
+def _compression(chain: Chain, value: str) -> None:
+    if value.split(":")[0].lower() not in _COMPRESSIONS:
+        raise ChainError(f"{value!r}: choose from {', '.join(_COMPRESSIONS)}")
+    chain.settings["compression"] = value.lower()
+
+
+def output_path(chain: Chain, text: str) -> Path:
+    """``-o`` argument with the set's pattern fields (``{first_stem}``...) filled in."""
+    if _pattern_free(Path(text)):
+        return Path(text)
+    try:
+        return Path(text.format(**chain.fields))
+    except (KeyError, IndexError) as error:
+        raise ChainError(f"unknown field {error} in the output name; use {{first_stem}}, "
+                         "{last_stem}, {index}, {count} or {folder}") from None
+
+
+@operation("-o", "FILE", convert=_one,
+           help="write the top image: EXR for scene-linear (with hdrio's header), JPEG, PNG "
+                "or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
+           example="-o {first_stem}_hdr.exr")
+def _output(chain: Chain, text: str) -> None:
+    from hdrio.io.write import write_exr, write_preview
+    from hdrio.pipeline import half_safe_scale
+
+    image = chain.top()
+    path = output_path(chain, text)
+    _check_outputs(path if path.suffix.lower() == ".exr" else None,
+                   None if path.suffix.lower() == ".exr" else path,
+                   [str(p) for p in chain.inputs])
+    if path.suffix.lower() != ".exr":
+        if not image.display:
+            raise ChainError("the image is scene-linear; tone-map it first "
+                             "(--tonemap reinhard-global) or write an .exr")
+        write_preview(path, image.pixels)
+    else:
+        data_type = chain.settings.get("data_type", "half")
+        scale = half_safe_scale(image.pixels) if data_type == "half" else 1.0
+        attributes = dict(image.attributes)
+        if not image.display:
+            attributes["hdrio:exposureScale"] = float(image.scale * scale)
+        pixels = image.pixels * scale if scale != 1.0 else image.pixels
+        write_exr(path, pixels, attributes, pixel_type=data_type,
+                  compression=chain.settings.get("compression", "zip"))
+    chain.progress.step(f"wrote {path}")
+    chain.say(f"wrote {path}")
+
+
+def check_outputs(steps: list[Step]) -> None:
+    """Refuse bad ``-o`` names before any work (type, folder, overwriting an input)."""
+    inputs = [str(step.value) for step in steps if step.name == "read"]
+    for step in steps:
+        if step.name != "-o":
+            continue
+        path = Path(step.value)
+        suffix = path.suffix.lower()
+        if suffix not in IMAGE_SUFFIXES | {".exr"}:
+            raise ChainError(f"{step.text}: unsupported output type; use .exr, "
+                             f"{', '.join(sorted(IMAGE_SUFFIXES))}")
+        if _pattern_free(path):
+            try:
+                _check_outputs(path if suffix == ".exr" else None,
+                               None if suffix == ".exr" else path, inputs)
+            except HdrioError as error:
+                raise ChainError(f"{step.text}: {error}") from None
+
+
+# ------------------------------------------------------------------------ information
+
+
+@operation("--info", help="print what the top image is: size, channels, provenance",
+           example="in.exr --info")
+def _info(chain: Chain, _values: list[str]) -> None:
+    if not chain.images and chain.brackets:
+        chain.say(f"{len(chain.brackets)} brackets waiting for --merge: "
+                  + ", ".join(str(p) for p in chain.brackets))
+        return
+    image = chain.top()
+    height, width, channels = image.pixels.shape
+    kind = "display-referred (sRGB)" if image.display else "scene-linear"
+    chain.say(f"{image.label}: {width}x{height}, {channels} channels, {kind}")
+    for name in ("hdrio:responseMethod", "hdrio:exposureSource", "hdrio:mergeDomain"):
+        if name in image.attributes:
+            chain.say(f"  {name:24s} {image.attributes[name]}")
+    sources = image.attributes.get("hdrio:sourceFiles")
+    if sources:
+        chain.say(f"  {'hdrio:sourceFiles':24s} {', '.join(map(str, sources))}")
+
+
+@operation("--stats", help="print per-channel min, max, mean, NaN/Inf/negative counts and "
+                           "the dynamic range in stops", example="--merge --stats")
+def _stats(chain: Chain, _values: list[str]) -> None:
+    from hdrio.imageops import image_statistics
+
+    stats = image_statistics(chain.top().pixels)
+    for name in ("min", "max", "mean"):
+        chain.say(f"  {name:8s} " + " ".join(f"{v:.6g}" for v in stats[name]))
+    chain.say(f"  nan {stats['nan']}, inf {stats['inf']}, negative {stats['negative']}")
+    if "range_stops" in stats:
+        chain.say(f"  range    {stats['range_stops']:.2f} stops (0.1-99.9 percentile: "
+                  f"{stats['robust_range_stops']:.2f} stops)")
+
+
+# ------------------------------------------------------------------- global settings
+
+
+@operation("-v", help="print each step and its progress on stderr", example="-v a.jpg ...",
+           per_set=False)
+def _verbose(chain: Chain, _values: list[str]) -> None:
+    chain.progress.quiet = False
+
+
+def _count(values: list[str]) -> int:
+    if not values[0].isdigit() or int(values[0]) < 1:
+        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
+    return int(values[0])
+
+
+@operation("--threads", "N", convert=_count, per_set=False,
+           help="threads for OpenImageIO, and processes for merging bracket sets (--group)",
+           example="--threads 4")
+def _threads(chain: Chain, count: int) -> None:
+    import OpenImageIO as oiio
+
+    oiio.attribute("threads", count)
+    chain.settings["threads"] = count
+
+
+@operation("--dry-run", per_set=False,
+           help="print the plan (the sets --group finds, what would be written or skipped) "
+                "and do nothing", example="shoot/ --group --merge -o {first_stem}.exr --dry-run")
+def _dry_run(chain: Chain, _values: list[str]) -> None:
+    chain.dry_run = True
+
+
+@operation("--group", help="split the pending brackets into bracket sets (capture time, "
+                           "exposure pattern, sequence) and run the rest of the chain on "
+                           "each set, in parallel; sets whose outputs are complete are "
+                           "skipped", example="shoot/ --group --merge -o {first_stem}_hdr.exr")
+def _group(chain: Chain, _values: list[str]) -> None:  # run by chain.run_steps
+    raise AssertionError("--group is run by run_steps")
+
