@@ -228,23 +228,32 @@ def _resize(chain: Chain, size: str) -> None:
 # ----------------------------------------------------------------------------- output
 
 
-@operation("-d", "TYPE", convert=_one,
+def _pixel_type(values: list[str]) -> str:
+    if values[0] not in ("half", "float"):
+        raise ValueError(f"{values[0]!r}: choose half or float")
+    return values[0]
+
+
+def _compression_name(values: list[str]) -> str:
+    name, _, level = values[0].lower().partition(":")
+    if name not in _COMPRESSIONS or (level and not level.isdigit()):
+        raise ValueError(f"{values[0]!r}: choose from {', '.join(_COMPRESSIONS)}")
+    return values[0].lower()
+
+
+@operation("-d", "TYPE", convert=_pixel_type,
            help="pixel type of the following EXR outputs: half (default) or float",
            example="-d float -o out.exr")
 def _data_type(chain: Chain, value: str) -> None:
-    if value not in ("half", "float"):
-        raise ChainError(f"{value!r}: choose half or float")
     chain.settings["data_type"] = value
 
 
-@operation("--compression", "NAME", convert=_one,
+@operation("--compression", "NAME", convert=_compression_name,
            help=f"compression of the following EXR outputs: {', '.join(_COMPRESSIONS)} "
                 "(default zip; dwaa:45 sets a level)",
            example="--compression piz -o out.exr")
 def _compression(chain: Chain, value: str) -> None:
-    if value.split(":")[0].lower() not in _COMPRESSIONS:
-        raise ChainError(f"{value!r}: choose from {', '.join(_COMPRESSIONS)}")
-    chain.settings["compression"] = value.lower()
+    chain.settings["compression"] = value
 
 
 def output_path(chain: Chain, text: str) -> Path:
