@@ -171,11 +171,11 @@ def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
     from hdrio.cli import chain_ops
 
     for index, step in enumerate(steps):
-        if step.name == "--group":
-            chain_ops.run_groups(chain, step, list(steps[index + 1:]))
-            return
         chain.progress.step(step.text)
         try:
+            if step.name == "--group":
+                chain_ops.run_groups(chain, step, list(steps[index + 1:]))
+                return
             if step.name == "read":
                 chain_ops.read_input(chain, step.value)
             elif OPERATIONS[step.name].per_set:
