@@ -166,9 +166,19 @@ def parse(argv: Sequence[str]) -> list[Step]:
     return steps
 
 
+def load_operations() -> None:
+    """Import the modules that register operations (each imports this one).
+
+    A new family of operations (colour management, say) adds its module here.
+    """
+    from hdrio.cli import chain_ops, chain_pictures  # noqa: F401
+
+
 def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
     """Run ``steps`` in order on ``chain``; errors name the step at fault."""
     from hdrio.cli import chain_ops
+
+    load_operations()
 
     for index, step in enumerate(steps):
         chain.progress.step(step.text)
@@ -221,8 +231,9 @@ def help_text() -> str:
 
 def main(argv: Sequence[str]) -> int:
     """Run a chain; returns the exit code (2 with one line on stderr for bad input)."""
-    from hdrio.cli import chain_ops  # registers the operations
+    from hdrio.cli import chain_ops
 
+    load_operations()
     if not argv or argv[0] in ("-h", "--help"):
         print(help_text(), file=sys.stdout if argv else sys.stderr)
         return 0 if argv else 2
