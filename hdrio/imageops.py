@@ -19,10 +19,12 @@ def apply_exposure(pixels: np.ndarray, stops: float) -> np.ndarray:
 
 
 def resize(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Resample to ``width x height`` pixels with OpenImageIO's default filter.
+    """Resample to ``width x height`` pixels with a triangle (bilinear) filter.
 
     A linear filter on scene-linear values keeps total energy: downsizing averages
-    radiance, as a lower-resolution sensor would.
+    radiance, as a lower-resolution sensor would. The filter is non-negative: OpenImageIO's
+    default (Lanczos, Blackman-Harris) rings around a bright window, giving negative
+    radiance beside it.
     """
     import OpenImageIO as oiio
 
@@ -30,7 +32,7 @@ def resize(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
         raise ValueError(f"size must be at least 1x1, got {width}x{height}")
     source = oiio.ImageBuf(np.ascontiguousarray(pixels, dtype=np.float32))
     roi = oiio.ROI(0, width, 0, height, 0, 1, 0, pixels.shape[-1])
-    result = oiio.ImageBufAlgo.resize(source, roi=roi)
+    result = oiio.ImageBufAlgo.resize(source, filtername="triangle", roi=roi)
     if result.has_error:
         raise ValueError(f"resize failed: {result.geterror()}")
     return np.asarray(result.get_pixels(oiio.FLOAT), dtype=np.float32).reshape(

@@ -196,9 +196,24 @@ def test_tonemap_parameters_reach_the_operator(brackets, out, capsys):
 @pytest.mark.parametrize(("size", "expected"), [("32x0", (32, 24)), ("50%", (32, 24)),
                                                 ("0x12", (16, 12)), ("20x10", (20, 10))])
 def test_resize(brackets, out, capsys, size, expected):
-    code, _, err = run(capsys, *brackets, "--merge", "--resize", size, "-o", out / "r.exr")
+    code, _, err = run(capsys, *brackets, "--merge", "-d", "float", "--resize", size,
+                       "-o", out / "r.exr")
     assert code == 0, err
     assert image_size(out / "r.exr") == expected
+    assert exr_pixels(out / "r.exr").min() > 0  # a non-negative filter: no ringing below 0
+
+
+def test_resize_does_not_ring_around_a_bright_window(tmp_path, out, capsys):
+    scene = np.full((64, 64, 3), 0.01, np.float32)
+    scene[16:48, 16:48] = 1000.0  # a window 17 stops above the wall
+    exr = write_image(tmp_path / "window.exr", scene, "float")
+    code, _, err = run(capsys, exr, "--resize", "24x24", "-d", "float", "-o", out / "w.exr")
+    assert code == 0, err
+    pixels = exr_pixels(out / "w.exr")
+    # A non-negative filter averages: every value stays between the wall and the window
+    # (to float32 rounding of the filter weights, 1e-5 relative). Lanczos would undershoot
+    # far below 0 beside the window.
+    assert pixels.min() >= 0.01 * (1 - 1e-5) and pixels.max() <= 1000.0 * (1 + 1e-5)
 
 
 def test_data_type_and_compression(brackets, out, capsys):

@@ -64,7 +64,11 @@ def read_input(chain: Chain, path: Path) -> None:
     if path.suffix.lower() in FLOAT_SUFFIXES:
         from hdrio.imageops import read_image
 
-        pixels, attributes = read_image(path)
+        pixels, header = read_image(path)
+        # Carry what describes the pixels (primaries, hdrio's provenance), not the file's
+        # layout attributes (data window, screen window...), which the writer sets anew.
+        attributes = {name: value for name, value in header.items()
+                      if name == "chromaticities" or name.startswith("hdrio:")}
         scale = float(attributes.get("hdrio:exposureScale", 1.0))
         chain.images.append(Image(pixels, attributes, str(path), scale=scale))
     else:
