@@ -30,6 +30,9 @@ def _plan_sets(chain: Chain, rest: list[Step]) -> list[tuple[int, Any, list[Path
 
     if not chain.brackets:
         raise ChainError("no brackets to group: give a folder or files before --group")
+    if "exposures" in chain.settings:
+        raise ChainError("--exposures cannot serve several sets; use EXIF (the default) "
+                         "or --exposures-from")
     plan = []
     for index, bracket_set in enumerate(group_brackets(chain.brackets), start=1):
         outputs = _set_outputs(rest, bracket_set.fields(index))

@@ -113,6 +113,23 @@ def _response_from(chain: Chain, path: str) -> None:
     chain.settings["response_from"] = read_response(path)
 
 
+def _multipliers(values: list[str]) -> tuple[float, ...]:
+    try:
+        numbers = tuple(float(v) for v in values[0].split(","))
+    except ValueError:
+        raise ValueError("expected R,G,B multipliers, e.g. 2.1,1,1.6") from None
+    if len(numbers) != 3 or min(numbers) <= 0:
+        raise ValueError("expected three positive multipliers R,G,B")
+    return numbers
+
+
+@operation("--white-balance", "R,G,B", convert=_multipliers,
+           help="camera RAW: white-balance multipliers for the set (default: as shot in "
+                "its first file)", example="IMG_*.CR3 --white-balance 2.1,1,1.6 --merge")
+def _white_balance(chain: Chain, multipliers: tuple[float, ...]) -> None:
+    chain.settings["white_balance"] = multipliers
+
+
 # ------------------------------------------------------------------------------ merge
 
 
@@ -145,7 +162,8 @@ def _merge(chain: Chain, domain: str) -> None:
     settings = chain.settings
     stack = read_brackets(chain.brackets, exposures=settings.pop("exposures", None),
                           exposures_from=settings.pop("exposures_from", None),
-                          progress=chain.progress.bar)
+                          progress=chain.progress.bar,
+                          white_balance=settings.get("white_balance"))
     options = MergeOptions(response=settings.get("response", "Debevec1997"), merge=domain)
     result = merge_stack(stack, options, chain.progress.step,
                          response=settings.get("response_from"))

@@ -129,6 +129,7 @@ def read_brackets(
     exposures: Sequence[float | str] | None = None,
     exposures_from: str | Path | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    white_balance: Sequence[float] | None = None,
 ) -> ExposureStack:
     """Read brackets into an :class:`ExposureStack` sorted by increasing exposure.
 
@@ -144,6 +145,9 @@ def read_brackets(
         A sidecar list (CSV or OpenCV ``list.txt``; see :mod:`hdrio.io.exposure`).
     progress
         Called as ``progress(done, total, path)`` after each file.
+    white_balance
+        Camera RAW only: multipliers ``(R, G, B)`` for the whole set instead of the first
+        file's as-shot ones.
 
     Without either, EXIF is used when every file has an exposure time, else the
     file-name convention when every name has one. Raises :class:`InputError` naming the
@@ -157,7 +161,7 @@ def read_brackets(
         raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "
                                                         "be merged together; use one kind")
     if all(raw):
-        decoded = read_raw_set(paths, progress=progress)
+        decoded = read_raw_set(paths, white_balance, progress=progress)
     else:
         decoded = []
         for done, path in enumerate(paths, start=1):
