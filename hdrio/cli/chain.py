@@ -48,6 +48,11 @@ class Operation:
 OPERATIONS: dict[str, Operation] = {}
 
 
+def one_argument(values: list[str]) -> str:
+    """The converter of an operation with one argument kept as text."""
+    return values[0]
+
+
 def operation(name: str, *arguments: str, help: str, example: str,
               convert: Callable[[list[str]], Any] | None = None, optional: str | None = None,
               accepts_optional: Callable[[str], bool] | None = None,
@@ -171,23 +176,23 @@ def load_operations() -> None:
 
     A new family of operations (colour management, say) adds its module here.
     """
-    from hdrio.cli import chain_ops, chain_pictures  # noqa: F401
+    from hdrio.cli import chain_ops, chain_output, chain_pictures  # noqa: F401
 
 
 def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
     """Run ``steps`` in order on ``chain``; errors name the step at fault."""
-    from hdrio.cli import chain_ops
+    from hdrio.cli.chain_batch import run_groups
+    from hdrio.cli.chain_ops import read_input
 
     load_operations()
-
     for index, step in enumerate(steps):
         chain.progress.step(step.text)
         try:
             if step.name == "--group":
-                chain_ops.run_groups(chain, step, list(steps[index + 1:]))
+                run_groups(chain, step, list(steps[index + 1:]))
                 return
             if step.name == "read":
-                chain_ops.read_input(chain, step.value)
+                read_input(chain, step.value)
             elif OPERATIONS[step.name].per_set:
                 OPERATIONS[step.name].run(chain, step.value)
         except ChainError as error:
@@ -231,7 +236,8 @@ def help_text() -> str:
 
 def main(argv: Sequence[str]) -> int:
     """Run a chain; returns the exit code (2 with one line on stderr for bad input)."""
-    from hdrio.cli import chain_ops
+    from hdrio.cli.chain_batch import print_plan
+    from hdrio.cli.chain_output import check_outputs
 
     load_operations()
     if not argv or argv[0] in ("-h", "--help"):
@@ -243,9 +249,9 @@ def main(argv: Sequence[str]) -> int:
         for step in steps:  # global settings (-v, --threads, --dry-run) first
             if step.name != "read" and not OPERATIONS[step.name].per_set:
                 OPERATIONS[step.name].run(chain, step.value)
-        chain_ops.check_outputs(steps)
+        check_outputs(steps)
         if chain.dry_run:
-            chain_ops.print_plan(chain, steps)
+            print_plan(chain, steps)
             return 0
         run_steps(chain, steps)
     except HdrioError as error:

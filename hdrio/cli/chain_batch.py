@@ -18,7 +18,7 @@ from hdrio.errors import HdrioError
 
 
 def _set_outputs(steps: list[Step], fields: dict[str, str]) -> list[Path]:
-    from hdrio.cli.chain_ops import output_path
+    from hdrio.cli.chain_output import output_path
 
     probe = Chain(fields=fields)
     return [output_path(probe, step.value) for step in steps if step.name == "-o"]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from hdrio.cli.chain import Chain, ChainError, operation
-from hdrio.cli.chain_ops import output_path
+from hdrio.cli.chain_output import output_path
 
 
 def _latest_merge(chain: Chain):
