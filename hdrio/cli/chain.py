@@ -236,10 +236,10 @@ def help_text() -> str:
 
 def main(argv: Sequence[str]) -> int:
     """Run a chain; returns the exit code (2 with one line on stderr for bad input)."""
+    load_operations()  # first, so that --help lists operations in the modules' order
     from hdrio.cli.chain_batch import print_plan
     from hdrio.cli.chain_output import check_outputs
 
-    load_operations()
     if not argv or argv[0] in ("-h", "--help"):
         print(help_text(), file=sys.stdout if argv else sys.stderr)
         return 0 if argv else 2
