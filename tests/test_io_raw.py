@@ -131,3 +131,16 @@ def test_given_white_balance_through_the_chain(dngs, truth, tmp_path, capsys):
     # 2 within 2 %: the merge is within 0.1 % per channel (test above); the margin covers
     # LibRaw's clipping of the now brighter red in the longer frames.
     assert ratio == pytest.approx(2.0, rel=0.02)
+
+
+def test_raw_frames_group_by_their_own_capture_times(dngs, truth, tmp_path):
+    from hdrio.grouping import group_brackets
+
+    later = datetime.datetime(2026, 3, 1, 10, 5, 0)  # five minutes on: another position
+    more = [write_dng(tmp_path / f"IMG_{9 + j:04d}.dng", mosaic_of(truth, t), t,
+                      captured=later + datetime.timedelta(seconds=j))
+            for j, t in enumerate(EXPOSURES[:2])]
+    sets = group_brackets([*more, *dngs])
+    assert [[f.path.name for f in s.frames] for s in sets] == [
+        [p.name for p in dngs], [p.name for p in more]]
+    assert [f.exposure for f in sets[0].frames] == pytest.approx(EXPOSURES)

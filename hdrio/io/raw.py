@@ -66,8 +66,12 @@ def raw_exif(path: str | Path) -> dict:
     """
     path = Path(path)
     with _open(path) as raw:
-        other = raw.other
+        # RawPy.other (shutter, aperture, ISO, time) is recent in rawpy (0.28 here); older
+        # versions give no EXIF, and exposures then come from a sidecar or --exposures.
+        other = getattr(raw, "other", None)
     exif: dict = {}
+    if other is None:
+        return exif
     for key, value in (("ExposureTime", other.shutter_speed), ("FNumber", other.aperture),
                        ("ISO", other.iso_speed)):
         if value and value > 0:
