@@ -20,6 +20,7 @@ from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
 from hdrio.io.brackets import read_brackets
+from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
 from hdrio.response import RESPONSE_METHODS, CameraResponse
@@ -87,22 +88,32 @@ def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.nda
 
 
 def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
-                progress: Progress | None = None) -> MergeResult:
-    """Recover the response and merge ``stack`` (no file I/O)."""
+                progress: Progress | None = None,
+                response: CameraResponse | None = None) -> MergeResult:
+    """Recover the response and merge ``stack`` (no file I/O).
+
+    ``response``, when given (e.g. read back with :func:`hdrio.response.stored.read_response`),
+    is used instead of a solve; camera RAW stacks use the linear response.
+    """
     say = progress or (lambda message: None)
     timings: dict[str, float] = {}
     start = time.perf_counter()
-    say(f"solving camera response ({options.response}, lambda {options.smoothing:g})")
-    response = RESPONSE_METHODS[options.response](
-        stack, smoothing=options.smoothing, weighting=options.weighting,
-        sampling=options.sampling, samples=options.samples,
-        exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
-    )
+    if response is None:
+        method = "linear" if is_raw_stack(stack) else options.response
+        say(f"camera response: {method}" + ("" if method == "linear"
+                                            else f", lambda {options.smoothing:g}"))
+        response = RESPONSE_METHODS[method](
+            stack, smoothing=options.smoothing, weighting=options.weighting,
+            sampling=options.sampling, samples=options.samples,
+            exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
+        )
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
     say(f"merging {stack.count} brackets ({options.merge} domain)")
     radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting,
                                                          options.saturation)
+    if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
+        radiance = xyz_to_working(radiance, options.colourspace)
     timings["merge"] = time.perf_counter() - start
     radiance, colour = colour_stage(
         stack, response, radiance, input_encoding=options.input_encoding,
@@ -164,14 +175,17 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
 
 
 def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
-                   space: str = DEFAULT_SPACE) -> np.ndarray:
-    """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1]."""
+                   space: str = DEFAULT_SPACE, **parameters: float) -> np.ndarray:
+    """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1].
+
+    ``parameters`` go to the operator (e.g. ``key=0.18`` for the Reinhard operators).
+    """
     function = TONEMAP_METHODS[operator]
     canonical = TONEMAP_METHODS.canonical(operator)
     if canonical.endswith("tutorial"):
-        display = function(radiance.astype(np.float64))
+        display = function(radiance.astype(np.float64), **parameters)
     else:
-        display = function(radiance, space=space)
+        display = function(radiance, space=space, **parameters)
     display = np.nan_to_num(display, nan=0.0)
     if display.shape[-1] == 1:
         display = np.repeat(display, 3, axis=-1)

@@ -11,6 +11,7 @@ from hdrio.cli import colour, commands
 from hdrio.errors import HdrioError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+SUBCOMMANDS = frozenset({"merge", "info", "demo"})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,7 +30,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``hdrio``; returns the exit code (2 for bad input, with one line on stderr)."""
+    """Run ``hdrio``; returns the exit code (2 for bad input, with one line on stderr).
+
+    ``hdrio COMMAND ...`` runs a subcommand; anything else is an oiiotool-style chain
+    (:mod:`hdrio.cli.chain`).
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in SUBCOMMANDS | {"--version"}:
+        from hdrio.cli import chain
+
+        return chain.main(argv)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

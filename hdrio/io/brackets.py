@@ -21,6 +21,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
+from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
@@ -94,22 +95,34 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
                     path, f"{base} pixels are not bracket code values; use 8- or 16-bit images"
                 )
             dtype, code_max = _CODE_TYPES[base]
-            exif = {
-                "ExposureTime": spec.getattribute("ExposureTime"),
-                "FNumber": spec.getattribute("FNumber"),
-                "ISO": spec.getattribute("Exif:PhotographicSensitivity")
-                or spec.getattribute("Exif:ISOSpeedRatings"),
-                "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
-                # The input encoding (hdrio.cms.encoding): ICC description, EXIF ColorSpace.
-                "ICCDescription": spec.getattribute("ICCProfile:profile_description"),
-                "ExifColorSpace": spec.getattribute("Exif:ColorSpace"),
-            }
-            header = BracketHeader(
-                path, spec.height, spec.width, 3 if spec.nchannels >= 3 else 1, code_max,
-                dtype, {key: value for key, value in exif.items() if value is not None})
+            header = BracketHeader(path, spec.height, spec.width,
+                                   3 if spec.nchannels >= 3 else 1, code_max, dtype,
+                                   _exif_of(spec))
             yield image, header
         finally:
             image.close()
+
+
+def _exif_of(spec) -> dict:
+    exif = {
+        "ExposureTime": spec.getattribute("ExposureTime"),
+        "FNumber": spec.getattribute("FNumber"),
+        "ISO": spec.getattribute("Exif:PhotographicSensitivity")
+        or spec.getattribute("Exif:ISOSpeedRatings"),
+        "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
+        # The input encoding (hdrio.cms.encoding): ICC description, EXIF ColorSpace.
+        "ICCDescription": spec.getattribute("ICCProfile:profile_description"),
+        "ExifColorSpace": spec.getattribute("Exif:ColorSpace"),
+    }
+    return {key: value for key, value in exif.items() if value is not None}
+
+
+def read_exif(path: str | Path) -> dict:
+    """The EXIF fields :func:`read_codes` returns, from the header alone (RAW included)."""
+    path = Path(path)
+    if is_raw(path):
+        return raw_exif(path)
+    return read_header(path).exif
 
 
 def read_header(path: str | Path) -> BracketHeader:
@@ -155,13 +168,15 @@ def read_brackets(
     exposures: Sequence[float | str] | None = None,
     exposures_from: str | Path | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    white_balance: Sequence[float] | None = None,
 ) -> ExposureStack:
     """Read brackets into an :class:`ExposureStack` sorted by increasing exposure.
 
     Parameters
     ----------
     paths
-        Image files (8- or 16-bit JPEG, PNG, TIFF, or anything OpenImageIO reads).
+        Image files (8- or 16-bit JPEG, PNG, TIFF, or anything OpenImageIO reads), or
+        camera RAW files (all of them; see :mod:`hdrio.io.raw`).
     exposures
         Exposure times in seconds (``"1/60"`` strings allowed), one per path: wins over
         every other source.
@@ -169,6 +184,9 @@ def read_brackets(
         A sidecar list (CSV or OpenCV ``list.txt``; see :mod:`hdrio.io.exposure`).
     progress
         Called as ``progress(done, total, path)`` after each file.
+    white_balance
+        Camera RAW only: multipliers ``(R, G, B)`` for the whole set instead of the first
+        file's as-shot ones.
 
     Without either, EXIF is used when every file has an exposure time, else the
     file-name convention when every name has one. Raises :class:`InputError` naming the
@@ -177,6 +195,12 @@ def read_brackets(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("<no input>", "no images given")
+    raw = [is_raw(path) for path in paths]
+    if any(raw) and not all(raw):
+        raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "
+                                                        "be merged together; use one kind")
+    if all(raw):
+        return _raw_stack(paths, exposures, exposures_from, progress, white_balance)
     # Headers first: sizes and exposures are checked before any pixel is decoded, and
     # each bracket is then decoded straight into its slot of one array, in exposure
     # order (peak memory: the stack plus one band of rows).
@@ -208,6 +232,25 @@ def read_brackets(
         exposure_sources=[source] * len(paths),
         metadata=[headers[j].exif for j in order],
     )
+
+
+def _raw_stack(paths: list[Path], exposures, exposures_from, progress,
+               white_balance: Sequence[float] | None) -> ExposureStack:
+    """Camera RAW brackets (:mod:`hdrio.io.raw`): linear codes, one white balance."""
+    decoded = read_raw_set(paths, white_balance, progress=progress)
+    first_codes, code_max, _ = decoded[0]
+    for path, (codes, this_max, _) in zip(paths, decoded):
+        if codes.shape != first_codes.shape or this_max != code_max:
+            raise InputError(
+                path,
+                f"is {_describe(codes.shape, this_max)} but {paths[0]} is "
+                f"{_describe(first_codes.shape, code_max)}: brackets must match",
+            )
+    exif = [entry[2] for entry in decoded]
+    values, source = _resolve_exposures(paths, exif, exposures, exposures_from)
+    return ExposureStack.from_arrays(
+        np.stack([entry[0] for entry in decoded]), values, files=[str(p) for p in paths],
+        code_max=code_max, exposure_sources=[source] * len(paths), metadata=exif)
 
 
 def _describe(shape: tuple[int, int, int], code_max: int) -> str:

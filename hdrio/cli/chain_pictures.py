@@ -1,0 +1,62 @@
+"""Chain operations that draw pictures of the latest merge (PNG, through hdrio.plots)."""
+
+from __future__ import annotations
+
+from hdrio.cli.chain import Chain, ChainError, operation
+from hdrio.cli.chain_output import output_path
+
+
+def _latest_merge(chain: Chain):
+    if chain.last_merge is None:
+        raise ChainError("no merge to draw: put this after --merge")
+    return chain.last_merge
+
+
+def _picture_name(values: list[str]) -> str:
+    if not values[0].lower().endswith(".png"):
+        raise ValueError("pictures are PNG files: name it *.png")
+    return values[0]
+
+
+def _written(chain: Chain, path) -> None:
+    chain.progress.step(f"wrote {path}")
+    chain.say(f"wrote {path}")
+
+
+@operation("--plot-response", "PNG", convert=_picture_name,
+           help="draw the camera response of the latest --merge per channel, with the "
+                "samples of the solve", example="--merge --plot-response response.png")
+def _plot_response(chain: Chain, name: str) -> None:
+    from hdrio.plots import plot_response
+
+    _written(chain, plot_response(_latest_merge(chain), output_path(chain, name)))
+
+
+@operation("--plot-contribution", "PNG", convert=_picture_name,
+           help="map which bracket contributed most to each pixel of the latest --merge",
+           example="--merge --plot-contribution brackets.png")
+def _plot_contribution(chain: Chain, name: str) -> None:
+    from hdrio.plots import plot_contribution
+
+    _written(chain, plot_contribution(_latest_merge(chain), output_path(chain, name)))
+
+
+@operation("--plot-stops", "PNG", convert=_picture_name,
+           help="false-colour map of the top image's luminance in stops from its median, "
+                "with a legend", example="--merge --plot-stops stops.png")
+def _plot_stops(chain: Chain, name: str) -> None:
+    from hdrio.plots import plot_stops
+
+    image = chain.top()
+    if image.display:
+        raise ChainError("the image is tone-mapped; draw stops before --tonemap")
+    _written(chain, plot_stops(image.pixels, output_path(chain, name)))
+
+
+@operation("--contact-sheet", "PNG", convert=_picture_name,
+           help="the brackets of the latest --merge side by side, with their exposures",
+           example="--merge --contact-sheet brackets_sheet.png")
+def _contact_sheet(chain: Chain, name: str) -> None:
+    from hdrio.plots import contact_sheet
+
+    _written(chain, contact_sheet(_latest_merge(chain).stack, output_path(chain, name)))
