@@ -1,0 +1,30 @@
+"""The speed benchmark runs end to end on a tiny size (tests never assert a timing)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchmarks.speed.__main__ import main
+
+
+def test_speed_benchmark_writes_rows_and_ratios(tmp_path, capsys):
+    pytest.importorskip("cv2", reason="OpenCV (the bench extra) is the peer being timed")
+    assert main(["--width", "96", "--height", "64", "--brackets", "5", "--repeats", "1",
+                 "--only", "merge,response,endtoend", "--out", str(tmp_path)]) == 0
+    results = json.loads((tmp_path / "speed.json").read_text())
+    methods = {row["method"] for row in results["rows"]}
+    assert {"hdrio merge (log)", "hdrio merge (linear)", "OpenCV MergeDebevec",
+            "floor (copy of the codes, all cores)", "I/O floor (decode JPEGs + write EXR)",
+            "hdrio merge process, 5 JPEGs"} <= methods
+    merges = [row for row in results["rows"]
+              if row["row"] == "merge" and row["method"].startswith("hdrio")]
+    # Same brackets, same true response: hdrio's merge is accurate where it is exposed.
+    assert all(row["median_error"] < 0.03 for row in merges)
+    assert all(value is None or value > 0 for value in results["ratios"].values())
+    assert "| merge |" in capsys.readouterr().out
+
+
+def test_unknown_section_is_refused(tmp_path):
+    assert main(["--only", "nope", "--out", str(tmp_path)]) == 2
