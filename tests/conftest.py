@@ -79,3 +79,27 @@ def write_brackets(tmp_path: Path) -> Callable[..., list[Path]]:
         ]
 
     return write
+
+
+@pytest.fixture
+def brackets(write_brackets) -> list[Path]:
+    """Four 48x64 8-bit PNGs of a smooth ramp, 2 stops apart, named by the tutorial's
+    convention (``bracket_1_16.png`` .. ``bracket_4_1.png``)."""
+    return write_brackets(DEFAULT_EXPOSURES)
+
+
+@pytest.fixture
+def out_dir(tmp_path: Path) -> Path:
+    """An empty folder for outputs, so anything left behind is easy to see."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    return folder
+
+
+def run_cli(capsys, *argv: object) -> tuple[int, str, str]:
+    """``hdrio.cli.main`` on ``argv`` (stringified): exit code, stdout, stderr."""
+    from hdrio.cli import main
+
+    code = main([str(arg) for arg in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err

@@ -13,30 +13,13 @@ import OpenEXR  # the test extra: proves our EXRs are readable by OpenEXR itself
 import OpenImageIO as oiio
 import pytest
 
-from hdrio.cli import main
 from hdrio.merge.weighting import WEIGHTING_METHODS
+from tests.conftest import DEFAULT_EXPOSURES
+from tests.conftest import run_cli as run
 
-EXPOSURES = (1 / 16, 1 / 4, 1.0, 4.0)  # what the fixture's file names say
-
-
-@pytest.fixture
-def brackets(write_brackets) -> list[Path]:
-    """Four 48x64 8-bit PNGs of a smooth ramp, named ``bracket_1_16.png`` .. ``bracket_4_1``."""
-    return write_brackets(EXPOSURES)
+EXPOSURES = DEFAULT_EXPOSURES  # what the fixture's file names say
 
 
-@pytest.fixture
-def out_dir(tmp_path) -> Path:
-    """An empty folder for outputs, so anything left behind is easy to see."""
-    folder = tmp_path / "out"
-    folder.mkdir()
-    return folder
-
-
-def run(capsys, *argv: object) -> tuple[int, str, str]:
-    code = main([str(arg) for arg in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_rejected(capsys, argv: list[object], out_dir: Path, *needles: str) -> str:
@@ -315,3 +298,13 @@ def test_importing_hdrio_pulls_in_no_front_end():
     process = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              timeout=120, check=True)
     assert json.loads(process.stdout) == []
+
+
+def test_every_subcommand_is_routed_to_its_parser_not_to_the_chain():
+    import argparse
+
+    from hdrio.cli import SUBCOMMANDS, build_parser
+
+    parser = build_parser()
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(action.choices) == SUBCOMMANDS

@@ -10,32 +10,18 @@ import OpenEXR
 import OpenImageIO as oiio
 import pytest
 
-from hdrio.cli import main
 from hdrio.cli.chain import OPERATIONS
 from hdrio.io.write import write_image
 from hdrio.synthetic import radiance_error, render_brackets, well_exposed
 from tests.conftest import DEFAULT_EXPOSURES, ramp_radiance
+from tests.conftest import run_cli as run
 
 EXPLICIT = "1/16,1/4,1,4"
 
 
 @pytest.fixture
-def brackets(write_brackets) -> list[Path]:
-    """Four 48x64 8-bit PNGs of a ramp, 2 stops apart, named by the tutorial's convention."""
-    return write_brackets(DEFAULT_EXPOSURES)
-
-
-@pytest.fixture
-def out(tmp_path) -> Path:
-    folder = tmp_path / "out"
-    folder.mkdir()
-    return folder
-
-
-def run(capsys, *argv: object) -> tuple[int, str, str]:
-    code = main([str(arg) for arg in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+def out(out_dir) -> Path:
+    return out_dir
 
 
 def exr_pixels(path: Path) -> np.ndarray:

@@ -98,12 +98,25 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "speed.json"
     path.write_text(json.dumps(results, indent=2))
-    print("\n".join(table(rows)))
-    for name, value in results["ratios"].items():
-        if value is not None:
-            print(f"{name}: {value:.2f}")
-    print(f"load average {load_before:.2f} -> {os.getloadavg()[0]:.2f}; wrote {path}")
+    report = markdown(results)
+    (args.out / "speed.md").write_text(report)
+    print(report)
+    print(f"wrote {path} and {args.out / 'speed.md'}")
     return 0
+
+
+def markdown(results: dict) -> str:
+    """The run as markdown: command, machine, the table and the acceptance ratios."""
+    environment = results["environment"]
+    lines = [f"Command: `{results['command']}`; {results['brackets']} brackets of "
+             f"{results['size'][0]}x{results['size'][1]}, median of {results['repeats']} "
+             f"repeat(s); load average {results['load_average'][0]:.2f} -> "
+             f"{results['load_average'][1]:.2f} on {environment.get('cpu_count', '?')} CPU(s); "
+             f"commit {str(environment.get('git_commit', '?'))[:10]}.", "",
+             *table(results["rows"]), "", "| ratio | value |", "|---|---:|"]
+    lines += [f"| {name} | {value:.2f} |" for name, value in results["ratios"].items()
+              if value is not None]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@ from hdrio.cli import colour, commands
 from hdrio.errors import HdrioError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
-SUBCOMMANDS = frozenset({"merge", "info", "demo"})
+# Must list every subcommand build_parser() adds; anything else is a chain.
+SUBCOMMANDS = frozenset({"merge", "info", "demo", "check", "export-response"})
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -65,8 +65,8 @@ class BakedResponse:
     weights
         ``(N, 3)`` merge weight at each position, peak 1 (unitless).
     code_max
-        Saturation code of the brackets (255 or 65535); a pixel with any channel at
-        ``code_max`` is saturated.
+        Saturation code of the brackets (255 or 65535); a channel at
+        ``code_max`` is saturated (dropped from that bracket and every longer one).
     label
         Where the response came from (shown in the node).
     """

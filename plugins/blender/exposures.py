@@ -27,7 +27,7 @@ def exposures_for_files(paths: Sequence[str | Path]) -> list[float]:
 def sorted_order(exposures: Sequence[float]) -> list[int]:
     """Input indices from the shortest exposure to the longest (ties keep input order).
 
-    The merge drops a pixel from every bracket at least as long as one where it saturated,
+    The merge drops a channel from every bracket at least as long as one where it saturated,
     so the node wires its inputs in this order.
     """
     return sorted(range(len(exposures)), key=lambda index: exposures[index])

@@ -2,11 +2,12 @@
 
 Per channel ``c`` and bracket ``j`` (brackets wired from the shortest exposure up), with
 ``z`` the bracket read as Non-Color (code / code_max), exactly as
-:func:`hdrio.merge.debevec1997.merge_brackets` with ``domain="linear"``::
+:func:`hdrio.merge.debevec1997.merge_brackets` with ``domain="linear"`` and its default
+per-channel saturation policy::
 
     E_j   = inverse_c(z) * peak_c / dt_j             radiance estimate (baked curve)
-    w_j   = weights_c(z) * keep_j                    baked weight, 0 once saturated
-    keep_j = 0 if any channel of any bracket <= j is at code_max, else 1
+    w_j   = weights_c(z) * keep_cj                   baked weight, 0 once saturated
+    keep_cj = 0 if channel c of any bracket <= j is at code_max, else 1
     E     = sum_j w_j E_j / sum_j w_j                where the weights sum above 0
             else the estimate of the longest bracket kept (the shortest if none)
 
@@ -41,20 +42,20 @@ def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedResponse,
     numerator: list = [None] * 3
     denominator: list = [None] * 3
     fallback: list = [None] * 3
-    dropped = None
+    dropped: list = [None] * 3
     for rank, index in enumerate(sorted_order(exposures)):
         exposure = float(exposures[index])
         image = group_in.outputs[index]
         codes = build.separate(image)
-        brightest = build.math("MAXIMUM", build.math("MAXIMUM", codes[0], codes[1]), codes[2])
-        saturated = build.math("GREATER_THAN", brightest, baked.saturation_level)
-        dropped = saturated if dropped is None else build.math("MAXIMUM", dropped, saturated)
-        keep = build.math("SUBTRACT", 1.0, dropped)
         inverse = build.separate(build.curves(
             image, baked.positions, baked.inverse, f"f^-1 ({exposure:g} s)"))
         weights = build.separate(build.curves(
             image, baked.positions, baked.weights, f"weight ({exposure:g} s)"))
         for c in range(3):
+            saturated = build.math("GREATER_THAN", codes[c], baked.saturation_level)
+            dropped[c] = (saturated if dropped[c] is None
+                          else build.math("MAXIMUM", dropped[c], saturated))
+            keep = build.math("SUBTRACT", 1.0, dropped[c])
             estimate = build.math("MULTIPLY", inverse[c], float(baked.peak[c]) / exposure)
             weight = build.math("MULTIPLY", weights[c], keep)
             if rank == 0:
