@@ -111,7 +111,7 @@ def test_export_refuses_an_exr_without_a_response(tmp_path):
     from hdrio.io.write import write_exr
 
     plain = write_exr(tmp_path / "plain.exr", np.ones((2, 2, 3), np.float32))
-    with pytest.raises(InputError, match="plain.exr: no hdrio:response"):
+    with pytest.raises(InputError, match="plain.exr: holds no hdrio response"):
         lut.export_response(plain, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.exr"]
 

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.encoding import DEFAULT_ENCODING, ENCODINGS, Encoding
-from hdrio.errors import InputError
 from hdrio.io.write import OutputError, write_text
 from hdrio.response.curve import CameraResponse
+from hdrio.response.stored import response_from_header
 
 
 def response_table(response: CameraResponse, levels: int | None = None) -> np.ndarray:
@@ -30,21 +30,16 @@ def response_table(response: CameraResponse, levels: int | None = None) -> np.nd
     return np.repeat(table, 3, axis=1) if table.shape[1] == 1 else table
 
 
-def response_from_header(path: str | Path, header: Mapping[str, object]
-                         ) -> tuple[np.ndarray, Encoding]:
+def recorded_linearisation(path: str | Path, header: Mapping[str, object]
+                           ) -> tuple[np.ndarray, Encoding]:
     """The ``(levels, 3)`` linearisation table and input encoding recorded by hdrio merge.
 
-    Raises :class:`InputError` naming ``path`` when the header has no hdrio response.
+    The response comes from :func:`hdrio.response.stored.response_from_header`, read at
+    the levels it was stored with. Raises :class:`InputError` naming ``path`` when the
+    header has no hdrio response.
     """
-    curves = [header.get(f"hdrio:response{c}") for c in "RGB"]
-    if curves[0] is None:
-        curves = [header.get("hdrio:responseY")]
-    if any(curve is None for curve in curves):
-        raise InputError(path, "no hdrio:response attributes: not an EXR written by hdrio "
-                               "merge")
-    table = np.exp(np.stack([np.asarray(c, dtype=np.float64) for c in curves], axis=1))
-    if table.shape[1] == 1:
-        table = np.repeat(table, 3, axis=1)
+    response = response_from_header(dict(header), str(path))
+    table = response_table(response, int(response.parameters["levels"]))
     recorded = str(header.get("hdrio:inputEncoding", DEFAULT_ENCODING))
     name = next((n for n in ENCODINGS if recorded.startswith(n)), DEFAULT_ENCODING)
     return table, ENCODINGS[name]
@@ -83,7 +78,7 @@ def export_response(exr: str | Path, output_dir: str | Path, name: str = "camera
         raise OutputError(f"{output_dir}: folder does not exist")
     if lut_format not in ("spi1d", "clf"):
         raise ValueError(f"LUT format must be spi1d or clf, not {lut_format!r}")
-    table, encoding = response_from_header(exr, read_header(exr))
+    table, encoding = recorded_linearisation(exr, read_header(exr))
     description = f"hdrio camera response from {Path(exr).name} ({encoding.name} primaries)"
     lut_path = output_dir / f"{name}.{lut_format}"
     text = (format_spi1d(table) if lut_format == "spi1d"
