@@ -1,0 +1,353 @@
+"""Fused, multi-threaded numba kernels behind the Reinhard (2002) paper operators.
+
+The formulas are those of :mod:`hdrio.tonemap.reinhard2002` (which documents them and is
+the public entry point); this module only evaluates them fast on large images:
+
+* one pass over the pixels for the log-average key, one for everything per-pixel after it
+  (luminance, scaling, compression, colour, clamp), with no full-size temporaries;
+* the local operator's nine Gaussian blurs are separable FIR filters with the same
+  kernels and mirrored borders as ``scipy.ndimage.gaussian_filter(..., truncate=4)``,
+  evaluated tile by tile (a band of rows) together with the scale selection (eq. 8) and
+  the colour step, so each blur lives only in a small per-tile buffer; a tile stops
+  blurring as soon as every pixel in it has settled (the largest scale it needs);
+* ``ln`` and ``x^s`` are branch-free polynomial evaluations (below) that the compiler
+  vectorises; numba has no vectorised ``powf``/``logf`` without Intel's SVML.
+
+Everything is float32 except the log sum and the exponent arithmetic of ``x^s`` (float64).
+Kernels compile on first use and are cached on disk (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
+
+TILE_ROWS = 16  # rows per tile of the local operator: 16 x 6000 float32 = 384 KB a buffer
+COLUMN_BLOCK = 1024  # columns per block of the vertical blur: (2 r + 1) x 4 KB stays in L2
+PIXEL_BLOCK = 1 << 16  # pixels per task of the per-pixel kernels
+_COLOUR_BLOCK = 4096  # pixels per block of the colour step (48 KB of RGB in, 48 KB out)
+_SQRT_HALF_BITS = 0x3F3504F3  # float32 bits of sqrt(1/2)
+_LN2 = math.log(2.0)
+_JIT = {"cache": True, "error_model": "numpy"}  # numpy errors: no zero-division branch
+
+
+@intrinsic
+def _float_bits(typingctx, x):
+    """The IEEE-754 bits of a float32 as an int32."""
+    if x != types.float32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(32))
+
+    return types.int32(types.float32), codegen
+
+
+@intrinsic
+def _bits_float(typingctx, x):
+    """The float32 whose IEEE-754 bits are the low 32 bits of integer ``x``."""
+    if not isinstance(x, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        value = args[0]
+        if x.bitwidth > 32:
+            value = builder.trunc(value, ir.IntType(32))
+        elif x.bitwidth < 32:
+            value = builder.sext(value, ir.IntType(32))
+        return builder.bitcast(value, ir.FloatType())
+
+    return types.float32(x), codegen
+
+
+@numba.njit(inline="always", **_JIT)
+def _log_parts(x: np.float32) -> tuple[int, np.float32]:
+    """``(e, ln m)`` with ``x = 2^e m``, ``m`` in [sqrt(1/2), sqrt(2)), for finite ``x > 0``.
+
+    ``ln m = 2 atanh(f)``, ``f = (m - 1) / (m + 1)``, to ``f^9`` (error < 1e-9).
+    """
+    shifted = _float_bits(x) - np.int32(_SQRT_HALF_BITS)
+    m = _bits_float((shifted & np.int32(0x7FFFFF)) + np.int32(_SQRT_HALF_BITS))
+    f = (m - np.float32(1.0)) / (m + np.float32(1.0))
+    f2 = f * f
+    p = np.float32(2.0 / 9.0) * f2 + np.float32(2.0 / 7.0)
+    p = p * f2 + np.float32(2.0 / 5.0)
+    p = p * f2 + np.float32(2.0 / 3.0)
+    p = p * f2 + np.float32(2.0)
+    return shifted >> 23, f * p
+
+
+@numba.njit(inline="always", **_JIT)
+def _ln(x: np.float32) -> float:
+    """Natural log of a finite float32 ``x > 0``, as float64 (about 1e-7 absolute)."""
+    e, ln_m = _log_parts(x)
+    return e * _LN2 + np.float64(ln_m)
+
+
+@numba.njit(inline="always", **_JIT)
+def _exp(y: float) -> np.float32:
+    """``e^y`` for float64 ``y``, float32 result (relative error about 2e-7); flushes to 0
+    below ``2^-126`` and saturates at ``2^127``."""
+    y = min(max(y, -126.0 * _LN2), 127.0 * _LN2)
+    n = math.floor(y * (1.0 / _LN2) + 0.5)
+    r = np.float32(y - n * _LN2)  # |r| <= ln(2) / 2
+    p = np.float32(1.0 / 5040.0) * r + np.float32(1.0 / 720.0)
+    p = p * r + np.float32(1.0 / 120.0)
+    p = p * r + np.float32(1.0 / 24.0)
+    p = p * r + np.float32(1.0 / 6.0)
+    p = p * r + np.float32(0.5)
+    p = p * r + np.float32(1.0)
+    p = p * r + np.float32(1.0)
+    return p * _bits_float((np.int64(n) + 127) << 23)
+
+
+@numba.njit(inline="always", **_JIT)
+def _power(x: np.float32, s: float) -> np.float32:
+    """``x^s`` for float32 ``x >= 0`` (``0^0 = 1``, NaN stays NaN)."""
+    if x != x:
+        return x
+    if x > 0:
+        return _exp(s * _ln(x))
+    return np.float32(1.0) if s == 0 else np.float32(0.0)
+
+
+@numba.njit(inline="always", **_JIT)
+def _channel(C: np.float32, L: np.float32, L_d: np.float32, saturation: float) -> np.float32:
+    """``clip((C / L)^saturation L_d, 0, 1)``, the ratio taken as 0 where ``L <= 0``."""
+    ratio = C / L if L > 0 else np.float32(0.0)
+    if ratio < 0:
+        ratio = np.float32(0.0)
+    value = _power(ratio, saturation) * L_d
+    if value < 0:
+        return np.float32(0.0)
+    return np.float32(1.0) if value > 1 else value
+
+
+@numba.njit(inline="always", **_JIT)
+def _luminance(rgb: np.ndarray, p: int, w: np.ndarray) -> np.float32:
+    return w[0] * rgb[3 * p] + w[1] * rgb[3 * p + 1] + w[2] * rgb[3 * p + 2]
+
+
+@numba.njit(inline="always", **_JIT)
+def _colour_channel(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_d: np.ndarray,
+                    saturation: float, c: int) -> None:
+    for p in range(L_d.shape[0]):
+        L = _luminance(rgb, p, weights)
+        out[3 * p + c] = _channel(rgb[3 * p + c], L, L_d[p], saturation)
+
+
+@numba.njit(**_JIT)
+def _colour(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_d: np.ndarray,
+            saturation: float) -> None:
+    """The colour step for flat RGB ``rgb`` into ``out``, given ``L_d`` per pixel.
+
+    One loop per channel (with the channel a constant) in blocks that stay in cache:
+    that is the shape the compiler vectorises (one loop over all three does not).
+    """
+    n = L_d.shape[0]
+    for p0 in range(0, n, _COLOUR_BLOCK):
+        p1 = min(n, p0 + _COLOUR_BLOCK)
+        src, dst, block = rgb[3 * p0: 3 * p1], out[3 * p0: 3 * p1], L_d[p0:p1]
+        _colour_channel(src, dst, weights, block, saturation, 0)
+        _colour_channel(src, dst, weights, block, saturation, 1)
+        _colour_channel(src, dst, weights, block, saturation, 2)
+
+
+@numba.njit(**_JIT, fastmath={"reassoc"})
+def _log_sum_block(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
+    total = 0.0
+    for p in range(rgb.shape[0] // 3):
+        L = max(np.float64(_luminance(rgb, p, weights)), 0.0)
+        total += _ln(np.float32(delta + L))
+    return total
+
+
+@numba.njit(parallel=True, **_JIT)
+def log_luminance_sum(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
+    """``sum(ln(delta + max(L, 0)))`` over the pixels of ``rgb`` (3N flat float32, ``L`` its
+    luminance with ``weights``), float64. Negative luminance counts as 0."""
+    n = rgb.shape[0] // 3
+    blocks = (n + PIXEL_BLOCK - 1) // PIXEL_BLOCK
+    partial = np.zeros(blocks)
+    for b in numba.prange(blocks):
+        stop = min(n, (b + 1) * PIXEL_BLOCK)
+        partial[b] = _log_sum_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], weights, delta)
+    return partial.sum()
+
+
+@numba.njit(**_JIT)
+def _global_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: np.float32,
+                  use_white: bool, white_squared: np.float32, saturation: float) -> None:
+    one = np.float32(1.0)
+    L_d = np.empty(rgb.shape[0] // 3, dtype=np.float32)
+    for p in range(L_d.shape[0]):
+        L_m = scale * _luminance(rgb, p, weights)
+        if use_white:
+            L_d[p] = L_m * (one + L_m / white_squared) / (one + L_m)
+        else:
+            L_d[p] = L_m / (one + L_m)
+    _colour(rgb, out, weights, L_d, saturation)
+
+
+@numba.njit(parallel=True, **_JIT)
+def global_operator(rgb: np.ndarray, weights: np.ndarray, scale: np.float32, use_white: bool,
+                    white_squared: np.float32, saturation: float) -> np.ndarray:
+    """Eqs. 2-4 and the colour step for ``rgb`` (3N flat float32, relative linear RGB);
+    ``scale = a / L_bar``; eq. 4 with ``L_white^2 = white_squared`` if ``use_white``, else
+    eq. 3.
+    Returns 3N flat float32 display-linear values in [0, 1]."""
+    n = rgb.shape[0] // 3
+    out = np.empty_like(rgb)
+    for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
+        stop = min(n, (b + 1) * PIXEL_BLOCK)
+        _global_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[3 * b * PIXEL_BLOCK: 3 * stop], weights, scale,
+                      use_white, white_squared, saturation)
+    return out
+
+
+@numba.njit(**_JIT)
+def _scale_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
+                 scale: np.float32) -> None:
+    for p in range(rgb.shape[0] // 3):
+        out[p] = scale * _luminance(rgb, p, weights)
+
+
+@numba.njit(parallel=True, **_JIT)
+def scaled_luminance(rgb: np.ndarray, weights: np.ndarray, scale: np.float32) -> np.ndarray:
+    """``L_m = scale L`` (eq. 2) for ``rgb`` (3N flat float32): N float32."""
+    n = rgb.shape[0] // 3
+    out = np.empty(n, dtype=np.float32)
+    for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
+        stop = min(n, (b + 1) * PIXEL_BLOCK)
+        _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[b * PIXEL_BLOCK: stop], weights, scale)
+    return out
+
+
+@numba.njit(inline="always", **_JIT)
+def _mirror(i: int, n: int) -> int:
+    """Index ``i`` reflected about the first and last samples' centres (scipy ``mirror``)."""
+    if n == 1:
+        return 0
+    period = 2 * (n - 1)
+    i = abs(i) % period
+    return i if i < n else period - i
+
+
+@numba.njit(**_JIT)
+def _axpy_pair(acc: np.ndarray, k: np.float32, a: np.ndarray, b: np.ndarray) -> None:
+    for x in range(acc.shape[0]):
+        acc[x] += k * (a[x] + b[x])
+
+
+@numba.njit(**_JIT)
+def _scaled_copy(acc: np.ndarray, k: np.float32, a: np.ndarray) -> None:
+    for x in range(acc.shape[0]):
+        acc[x] = k * a[x]
+
+
+@numba.njit(**_JIT)
+def _blur_rows(L_m: np.ndarray, y0: int, kernel: np.ndarray, vertical: np.ndarray,
+               padded: np.ndarray, out: np.ndarray) -> None:
+    """Rows ``y0 .. y0 + len(out)`` of ``L_m`` blurred with the symmetric odd ``kernel``
+    along axis 0, then axis 1 (as scipy), mirrored at the borders, into ``out``."""
+    height, width = L_m.shape
+    rows = out.shape[0]
+    r = kernel.shape[0] // 2
+    for x0 in range(0, width, COLUMN_BLOCK):  # vertical pass, a block of columns at a time
+        x1 = min(x0 + COLUMN_BLOCK, width)
+        for j in range(rows):
+            y = y0 + j
+            acc = vertical[j, x0:x1]
+            _scaled_copy(acc, kernel[r], L_m[_mirror(y, height), x0:x1])
+            for t in range(1, r + 1):
+                _axpy_pair(acc, kernel[r + t], L_m[_mirror(y - t, height), x0:x1],
+                           L_m[_mirror(y + t, height), x0:x1])
+    line = padded[: width + 2 * r]
+    for j in range(rows):  # horizontal pass, through a row padded with its mirror image
+        row = vertical[j]
+        for x in range(width + 2 * r):
+            line[x] = row[_mirror(x - r, width)]
+        dst = out[j]
+        _scaled_copy(dst, kernel[r], line[r: r + width])
+        for t in range(1, r + 1):
+            _axpy_pair(dst, kernel[r + t], line[r - t: r - t + width],
+                       line[r + t: r + t + width])
+
+
+@numba.njit(**_JIT)
+def _select(v1: np.ndarray, v1_next: np.ndarray, chosen: np.ndarray, open_: np.ndarray,
+            surround: np.float32, epsilon: np.float32) -> int:
+    """One step of eq. 8 on flat tile buffers; returns how many pixels are still open."""
+    still_open = 0
+    for p in range(v1.shape[0]):
+        activity = abs(v1[p] - v1_next[p]) / (surround + v1[p])
+        keep = open_[p] and not activity > epsilon
+        open_[p] = keep
+        if keep:
+            chosen[p] = v1[p]
+            still_open += 1
+    return still_open
+
+
+@numba.njit(**_JIT)
+def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
+                y0: int, rows: int, kernels: np.ndarray, radii: np.ndarray,
+                surround: np.ndarray, epsilon: np.float32, saturation: float) -> None:
+    width = L_m.shape[1]
+    size = rows * width
+    vertical = np.empty((rows, width), dtype=np.float32)
+    padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
+    v1 = np.empty((rows, width), dtype=np.float32)
+    v1_next = np.empty((rows, width), dtype=np.float32)
+    chosen = np.empty(size, dtype=np.float32)
+    open_ = np.ones(size, dtype=np.bool_)
+    _blur_rows(L_m, y0, kernels[0, : 2 * radii[0] + 1], vertical, padded, v1)
+    chosen[:] = v1.reshape(size)
+    for i in range(kernels.shape[0] - 1):
+        _blur_rows(L_m, y0, kernels[i + 1, : 2 * radii[i + 1] + 1], vertical, padded, v1_next)
+        if _select(v1.reshape(size), v1_next.reshape(size), chosen, open_, surround[i],
+                   epsilon) == 0:
+            break  # every pixel of the tile has its scale: no wider blur is needed
+        v1, v1_next = v1_next, v1
+    L_m_tile = L_m[y0: y0 + rows].reshape(size)
+    for p in range(size):  # eq. 9, in place
+        chosen[p] = L_m_tile[p] / (np.float32(1.0) + chosen[p])
+    start = 3 * y0 * width
+    _colour(rgb[start: start + 3 * size], out[start: start + 3 * size], weights, chosen,
+            saturation)
+
+
+@numba.njit(parallel=True, **_JIT)
+def local_operator(rgb: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
+                   kernels: np.ndarray, radii: np.ndarray, surround: np.ndarray,
+                   epsilon: np.float32, saturation: float) -> np.ndarray:
+    """Eqs. 5-9 and the colour step, a band of ``TILE_ROWS`` rows per task.
+
+    ``rgb`` is the H x W x 3 float32 image, flat, ``L_m`` the H x W
+    scaled luminance (eq. 2), ``kernels[i, :2 radii[i] + 1]`` the blur of scale ``i``,
+    ``surround[i] = 2^phi a / s_i^2``. Returns 3N flat float32 in [0, 1].
+    """
+    height = L_m.shape[0]
+    out = np.empty_like(rgb)
+    for tile in numba.prange((height + TILE_ROWS - 1) // TILE_ROWS):
+        y0 = tile * TILE_ROWS
+        _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels, radii,
+                    surround, epsilon, saturation)
+    return out
+
+
+def gaussian_kernel_scipy(sigma: float, truncate: float = 4.0) -> np.ndarray:
+    """The 1-D kernel of ``scipy.ndimage.gaussian_filter(sigma, truncate=truncate)``.
+
+    Radius ``int(truncate sigma + 0.5)`` pixels, samples ``exp(-x^2 / (2 sigma^2))``
+    normalised to sum 1, float64 (``scipy.ndimage._filters._gaussian_kernel1d``).
+    """
+    radius = int(truncate * float(sigma) + 0.5)
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    phi = np.exp(-0.5 / (sigma * sigma) * x**2)
+    return phi / phi.sum()
