@@ -91,8 +91,8 @@ def _ln(x: np.float32) -> float:
 
 @numba.njit(inline="always", **_JIT)
 def _exp(y: float) -> np.float32:
-    """``e^y`` for float64 ``y``, float32 result (relative error about 2e-7); flushes to 0
-    below ``2^-126`` and saturates at ``2^127``."""
+    """``e^y`` for float64 ``y``, float32 result (relative error about 2e-7), ``y``
+    clamped to the normal float32 range (results in about [2^-126, 2^128))."""
     y = min(max(y, -126.0 * _LN2), 127.0 * _LN2)
     n = math.floor(y * (1.0 / _LN2) + 0.5)
     r = np.float32(y - n * _LN2)  # |r| <= ln(2) / 2
@@ -205,8 +205,9 @@ def global_operator(rgb: np.ndarray, weights: np.ndarray, scale: np.float32, use
     out = np.empty_like(rgb)
     for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
         stop = min(n, (b + 1) * PIXEL_BLOCK)
-        _global_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[3 * b * PIXEL_BLOCK: 3 * stop], weights, scale,
-                      use_white, white_squared, saturation)
+        start = 3 * b * PIXEL_BLOCK
+        _global_block(rgb[start: 3 * stop], out[start: 3 * stop], weights, scale, use_white,
+                      white_squared, saturation)
     return out
 
 
@@ -245,6 +246,17 @@ def _axpy_pair(acc: np.ndarray, k: np.float32, a: np.ndarray, b: np.ndarray) -> 
 
 
 @numba.njit(**_JIT)
+def _axpy_pairs4(acc: np.ndarray, k: np.ndarray, a0: np.ndarray, b0: np.ndarray,
+                 a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray,
+                 a3: np.ndarray, b3: np.ndarray) -> None:
+    """Four symmetric taps at once (one pass over ``acc`` instead of four)."""
+    k0, k1, k2, k3 = k[0], k[1], k[2], k[3]
+    for x in range(acc.shape[0]):
+        acc[x] += (k0 * (a0[x] + b0[x]) + k1 * (a1[x] + b1[x])
+                   + (k2 * (a2[x] + b2[x]) + k3 * (a3[x] + b3[x])))
+
+
+@numba.njit(**_JIT)
 def _scaled_copy(acc: np.ndarray, k: np.float32, a: np.ndarray) -> None:
     for x in range(acc.shape[0]):
         acc[x] = k * a[x]
@@ -254,29 +266,53 @@ def _scaled_copy(acc: np.ndarray, k: np.float32, a: np.ndarray) -> None:
 def _blur_rows(L_m: np.ndarray, y0: int, kernel: np.ndarray, vertical: np.ndarray,
                padded: np.ndarray, out: np.ndarray) -> None:
     """Rows ``y0 .. y0 + len(out)`` of ``L_m`` blurred with the symmetric odd ``kernel``
-    along axis 0, then axis 1 (as scipy), mirrored at the borders, into ``out``."""
+    along axis 0, then axis 1 (as scipy), mirrored at the borders, into ``out``.
+
+    Taps are applied four at a time, folded (``k_t (x_{-t} + x_t)``), as scipy does."""
     height, width = L_m.shape
     rows = out.shape[0]
     r = kernel.shape[0] // 2
+    k = kernel[r:]  # k[t] for t = 0 .. r
     for x0 in range(0, width, COLUMN_BLOCK):  # vertical pass, a block of columns at a time
         x1 = min(x0 + COLUMN_BLOCK, width)
         for j in range(rows):
             y = y0 + j
             acc = vertical[j, x0:x1]
-            _scaled_copy(acc, kernel[r], L_m[_mirror(y, height), x0:x1])
-            for t in range(1, r + 1):
-                _axpy_pair(acc, kernel[r + t], L_m[_mirror(y - t, height), x0:x1],
-                           L_m[_mirror(y + t, height), x0:x1])
+            _scaled_copy(acc, k[0], L_m[_mirror(y, height), x0:x1])
+            t = 1
+            while t + 3 <= r:
+                _axpy_pairs4(acc, k[t: t + 4],
+                             L_m[_mirror(y - t, height), x0:x1],
+                             L_m[_mirror(y + t, height), x0:x1],
+                             L_m[_mirror(y - t - 1, height), x0:x1],
+                             L_m[_mirror(y + t + 1, height), x0:x1],
+                             L_m[_mirror(y - t - 2, height), x0:x1],
+                             L_m[_mirror(y + t + 2, height), x0:x1],
+                             L_m[_mirror(y - t - 3, height), x0:x1],
+                             L_m[_mirror(y + t + 3, height), x0:x1])
+                t += 4
+            for u in range(t, r + 1):
+                _axpy_pair(acc, k[u], L_m[_mirror(y - u, height), x0:x1],
+                           L_m[_mirror(y + u, height), x0:x1])
     line = padded[: width + 2 * r]
     for j in range(rows):  # horizontal pass, through a row padded with its mirror image
         row = vertical[j]
-        for x in range(width + 2 * r):
+        line[r: r + width] = row
+        for x in range(r):
             line[x] = row[_mirror(x - r, width)]
+            line[r + width + x] = row[_mirror(width + x, width)]
         dst = out[j]
-        _scaled_copy(dst, kernel[r], line[r: r + width])
-        for t in range(1, r + 1):
-            _axpy_pair(dst, kernel[r + t], line[r - t: r - t + width],
-                       line[r + t: r + t + width])
+        _scaled_copy(dst, k[0], line[r: r + width])
+        t = 1
+        while t + 3 <= r:
+            _axpy_pairs4(dst, k[t: t + 4],
+                         line[r - t: r - t + width], line[r + t: r + t + width],
+                         line[r - t - 1: r - t - 1 + width], line[r + t + 1: r + t + 1 + width],
+                         line[r - t - 2: r - t - 2 + width], line[r + t + 2: r + t + 2 + width],
+                         line[r - t - 3: r - t - 3 + width], line[r + t + 3: r + t + 3 + width])
+            t += 4
+        for u in range(t, r + 1):
+            _axpy_pair(dst, k[u], line[r - u: r - u + width], line[r + u: r + u + width])
 
 
 @numba.njit(**_JIT)
