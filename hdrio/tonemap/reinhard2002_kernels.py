@@ -33,7 +33,7 @@ PIXEL_BLOCK = 1 << 16  # pixels per task of the per-pixel kernels
 _COLOUR_BLOCK = 4096  # pixels per block of the colour step (48 KB of RGB in, 48 KB out)
 _SQRT_HALF_BITS = 0x3F3504F3  # float32 bits of sqrt(1/2)
 _LN2 = math.log(2.0)
-_JIT = {"cache": True, "error_model": "numpy"}  # numpy errors: no zero-division branch
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # no zero-division branch
 
 
 @intrinsic
