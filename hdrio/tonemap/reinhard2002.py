@@ -89,9 +89,10 @@ def tonemap_Reinhard2002_global(rgb: np.ndarray, key: float = 0.72, saturation: 
     weights = np.asarray(luminance_weights(space), dtype=np.float32)
     scale = _scene_key_scale(flat, weights, key, delta)
     white_squared = np.float32(0.0 if white is None else white**2)
-    out = kernels.global_operator(flat, weights, scale, white is not None, white_squared,
-                                  float(saturation))
-    return out.reshape(rgb.shape)
+    out = np.empty_like(rgb)
+    kernels.global_operator(flat, out.reshape(-1), weights, scale, white is not None,
+                            white_squared, float(saturation))
+    return out
 
 
 def _adapting_luminance(L: np.ndarray, blur: Callable[[np.ndarray, float], np.ndarray],
@@ -150,7 +151,8 @@ def tonemap_Reinhard2002_local(rgb: np.ndarray, key: float = 0.18, phi: float = 
     flat = rgb.reshape(-1)
     weights = np.asarray(luminance_weights(space), dtype=np.float32)
     scale = _scene_key_scale(flat, weights, key, delta)
-    L_m = kernels.scaled_luminance(flat, weights, scale).reshape(height, width)
+    L_m = np.empty((height, width), dtype=np.float32)
+    kernels.scaled_luminance(flat, L_m.reshape(-1), weights, scale)
     blurs = [kernels.gaussian_kernel_scipy(ALPHA_1 * SCALE_RATIO**i) for i in range(SCALES + 1)]
     radii = np.array([len(b) // 2 for b in blurs], dtype=np.int64)
     table = np.zeros((len(blurs), 2 * int(radii.max()) + 1), dtype=np.float32)
@@ -158,9 +160,10 @@ def tonemap_Reinhard2002_local(rgb: np.ndarray, key: float = 0.18, phi: float = 
         table[i, : len(blur)] = blur
     surround = np.array([2.0**phi * key / (SCALE_RATIO**i) ** 2 for i in range(SCALES)],
                         dtype=np.float32)  # eq. 7's 2^phi a / s^2, s = 1.6^i
-    out = kernels.local_operator(flat, weights, L_m, table, radii, surround,
-                                 np.float32(epsilon), float(saturation))
-    return out.reshape(rgb.shape)
+    out = np.empty_like(rgb)
+    kernels.local_operator(flat, out.reshape(-1), weights, L_m, table, radii, surround,
+                           np.float32(epsilon), float(saturation), kernels.threads())
+    return out
 
 
 def fspecial_gaussian(sigma: float) -> np.ndarray:

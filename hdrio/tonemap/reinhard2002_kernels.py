@@ -184,31 +184,36 @@ def log_luminance_sum(rgb: np.ndarray, weights: np.ndarray, delta: float) -> flo
 def _global_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: np.float32,
                   use_white: bool, white_squared: np.float32, saturation: float) -> None:
     one = np.float32(1.0)
-    L_d = np.empty(rgb.shape[0] // 3, dtype=np.float32)
-    for p in range(L_d.shape[0]):
-        L_m = scale * _luminance(rgb, p, weights)
-        if use_white:
-            L_d[p] = L_m * (one + L_m / white_squared) / (one + L_m)
-        else:
-            L_d[p] = L_m / (one + L_m)
-    _colour(rgb, out, weights, L_d, saturation)
+    n = rgb.shape[0] // 3
+    L_d = np.empty(_COLOUR_BLOCK, dtype=np.float32)  # small: from the heap, no page faults
+    for p0 in range(0, n, _COLOUR_BLOCK):
+        p1 = min(n, p0 + _COLOUR_BLOCK)
+        src = rgb[3 * p0: 3 * p1]
+        for p in range(p1 - p0):
+            L_m = scale * _luminance(src, p, weights)
+            if use_white:
+                L_d[p] = L_m * (one + L_m / white_squared) / (one + L_m)
+            else:
+                L_d[p] = L_m / (one + L_m)
+        _colour(src, out[3 * p0: 3 * p1], weights, L_d[: p1 - p0], saturation)
 
 
 @numba.njit(parallel=True, **_JIT)
-def global_operator(rgb: np.ndarray, weights: np.ndarray, scale: np.float32, use_white: bool,
-                    white_squared: np.float32, saturation: float) -> np.ndarray:
-    """Eqs. 2-4 and the colour step for ``rgb`` (3N flat float32, relative linear RGB);
-    ``scale = a / L_bar``; eq. 4 with ``L_white^2 = white_squared`` if ``use_white``, else
-    eq. 3.
-    Returns 3N flat float32 display-linear values in [0, 1]."""
+def global_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: np.float32,
+                    use_white: bool, white_squared: np.float32, saturation: float) -> None:
+    """Eqs. 2-4 and the colour step from ``rgb`` into ``out`` (both 3N flat float32;
+    relative linear RGB in, display-linear [0, 1] out); ``scale = a / L_bar``; eq. 4 with
+    ``L_white^2 = white_squared`` if ``use_white``, else eq. 3.
+
+    Outputs are allocated by the caller with numpy, which asks Linux for huge pages: a
+    fresh 288 MB array from numba's allocator cost as much in page faults as the work.
+    """
     n = rgb.shape[0] // 3
-    out = np.empty_like(rgb)
     for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
         stop = min(n, (b + 1) * PIXEL_BLOCK)
         start = 3 * b * PIXEL_BLOCK
         _global_block(rgb[start: 3 * stop], out[start: 3 * stop], weights, scale, use_white,
                       white_squared, saturation)
-    return out
 
 
 @numba.njit(**_JIT)
@@ -219,14 +224,14 @@ def _scale_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
 
 
 @numba.njit(parallel=True, **_JIT)
-def scaled_luminance(rgb: np.ndarray, weights: np.ndarray, scale: np.float32) -> np.ndarray:
-    """``L_m = scale L`` (eq. 2) for ``rgb`` (3N flat float32): N float32."""
+def scaled_luminance(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
+                     scale: np.float32) -> None:
+    """``L_m = scale L`` (eq. 2) from ``rgb`` (3N flat float32) into ``out`` (N float32)."""
     n = rgb.shape[0] // 3
-    out = np.empty(n, dtype=np.float32)
     for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
         stop = min(n, (b + 1) * PIXEL_BLOCK)
-        _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[b * PIXEL_BLOCK: stop], weights, scale)
-    return out
+        _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[b * PIXEL_BLOCK: stop], weights,
+                     scale)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -333,15 +338,18 @@ def _select(v1: np.ndarray, v1_next: np.ndarray, chosen: np.ndarray, open_: np.n
 @numba.njit(**_JIT)
 def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
                 y0: int, rows: int, kernels: np.ndarray, radii: np.ndarray,
-                surround: np.ndarray, epsilon: np.float32, saturation: float) -> None:
+                surround: np.ndarray, epsilon: np.float32, saturation: float,
+                workspace: np.ndarray, padded: np.ndarray, open_: np.ndarray) -> None:
+    """Rows ``y0 .. y0 + rows`` of the local operator; ``workspace`` holds four
+    ``TILE_ROWS x width`` buffers (blurred columns, ``V1(s)``, ``V1(1.6 s)``, chosen)."""
     width = L_m.shape[1]
     size = rows * width
-    vertical = np.empty((rows, width), dtype=np.float32)
-    padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
-    v1 = np.empty((rows, width), dtype=np.float32)
-    v1_next = np.empty((rows, width), dtype=np.float32)
-    chosen = np.empty(size, dtype=np.float32)
-    open_ = np.ones(size, dtype=np.bool_)
+    vertical = workspace[0, :rows]
+    v1 = workspace[1, :rows]
+    v1_next = workspace[2, :rows]
+    chosen = workspace[3, :rows].reshape(size)
+    open_ = open_[:size]
+    open_[:] = True
     _blur_rows(L_m, y0, kernels[0, : 2 * radii[0] + 1], vertical, padded, v1)
     chosen[:] = v1.reshape(size)
     for i in range(kernels.shape[0] - 1):
@@ -359,22 +367,28 @@ def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.n
 
 
 @numba.njit(parallel=True, **_JIT)
-def local_operator(rgb: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
+def local_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
                    kernels: np.ndarray, radii: np.ndarray, surround: np.ndarray,
-                   epsilon: np.float32, saturation: float) -> np.ndarray:
-    """Eqs. 5-9 and the colour step, a band of ``TILE_ROWS`` rows per task.
+                   epsilon: np.float32, saturation: float, threads: int) -> None:
+    """Eqs. 5-9 and the colour step, a band of ``TILE_ROWS`` rows at a time.
 
-    ``rgb`` is the H x W x 3 float32 image, flat, ``L_m`` the H x W
-    scaled luminance (eq. 2), ``kernels[i, :2 radii[i] + 1]`` the blur of scale ``i``,
-    ``surround[i] = 2^phi a / s_i^2``. Returns 3N flat float32 in [0, 1].
+    ``rgb`` and ``out`` are the H x W x 3 float32 images, flat (``out`` allocated by the
+    caller, see :func:`global_operator`), ``L_m`` the H x W scaled luminance (eq. 2),
+    ``kernels[i, :2 radii[i] + 1]`` the blur of scale ``i``, ``surround[i] = 2^phi a /
+    s_i^2``. Each of ``threads`` workers allocates its buffers once and takes every n-th
+    band (``numba.get_num_threads()`` here would keep the kernel out of the disk cache).
     """
-    height = L_m.shape[0]
-    out = np.empty_like(rgb)
-    for tile in numba.prange((height + TILE_ROWS - 1) // TILE_ROWS):
-        y0 = tile * TILE_ROWS
-        _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels, radii,
-                    surround, epsilon, saturation)
-    return out
+    height, width = L_m.shape
+    tiles = (height + TILE_ROWS - 1) // TILE_ROWS
+    workers = max(1, min(threads, tiles))
+    for worker in numba.prange(workers):
+        workspace = np.empty((4, TILE_ROWS, width), dtype=np.float32)
+        padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
+        open_ = np.empty(TILE_ROWS * width, dtype=np.bool_)
+        for tile in range(worker, tiles, workers):
+            y0 = tile * TILE_ROWS
+            _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels,
+                        radii, surround, epsilon, saturation, workspace, padded, open_)
 
 
 def gaussian_kernel_scipy(sigma: float, truncate: float = 4.0) -> np.ndarray:
@@ -387,3 +401,8 @@ def gaussian_kernel_scipy(sigma: float, truncate: float = 4.0) -> np.ndarray:
     x = np.arange(-radius, radius + 1, dtype=np.float64)
     phi = np.exp(-0.5 / (sigma * sigma) * x**2)
     return phi / phi.sum()
+
+
+def threads() -> int:
+    """numba's current thread count (``NUMBA_NUM_THREADS``, ``numba.set_num_threads``)."""
+    return numba.get_num_threads()
