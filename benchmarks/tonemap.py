@@ -165,6 +165,8 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help="JSON output (default benchmarks/results/tonemap.json)")
     parser.add_argument("--no-reference", action="store_true",
                         help="skip the slow numpy/scipy reference implementation")
+    parser.add_argument("--no-compile", action="store_true",
+                        help="skip measuring compile time in fresh processes (~40 s)")
     return parser.parse_args(argv)
 
 
@@ -178,8 +180,10 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     load_before = os.getloadavg()
-    print("compile (fresh processes, empty then warm numba cache) ...", flush=True)
-    compile_info = compile_times()
+    compile_info: dict[str, float] = {}
+    if not args.no_compile:
+        print("compile (fresh processes, empty then warm numba cache) ...", flush=True)
+        compile_info = compile_times()
     rows = []
     for width, height in ((args.width, args.height),
                           (max(1, args.width // 4), max(1, args.height // 4))):
@@ -197,16 +201,18 @@ def main(argv: list[str] | None = None) -> int:
     os.replace(temp, args.json)  # atomic: no half-written JSON
     print()
     print(table(rows))
-    print(f"\ncompile: first calls {compile_info['first_calls_s_cold_cache']:.1f} s with an "
-          f"empty cache, {compile_info['first_calls_s_warm_cache']:.2f} s from the cache "
-          f"(import {compile_info['import_s_warm_cache']:.2f} s)")
+    if compile_info:
+        print(f"\ncompile: first calls {compile_info['first_calls_s_cold_cache']:.1f} s with "
+              f"an empty cache, {compile_info['first_calls_s_warm_cache']:.2f} s from the "
+              f"cache (import {compile_info['import_s_warm_cache']:.2f} s)")
     print(f"load average (1, 5, 15 min): before {_load(load_before)}, after "
           f"{_load(load_after)} on {os.cpu_count()} CPUs; numba threads {_numba_threads()}")
     for name, target in TARGETS_S.items():
         big = next(r for r in rows if r["method"] == name)
-        verdict = "meets" if big["median_s"] < target else "misses"
-        print(f"{name} at {big['width']}x{big['height']}: median {big['median_s']:.3f} s, "
-              f"{verdict} the {target} s target")
+        if big["megapixels"] >= 24.0:  # the targets are stated for 24 MP
+            verdict = "meets" if big["median_s"] < target else "misses"
+            print(f"{name} at {big['width']}x{big['height']}: median {big['median_s']:.3f} s "
+                  f"(CPU {big['cpu_median_s']:.3f} s), {verdict} the {target} s target")
     print(f"wrote {args.json}")
     return 0
 
