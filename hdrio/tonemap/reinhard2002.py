@@ -14,6 +14,9 @@ Paper variants (``tonemap_Reinhard2002_global``, ``tonemap_Reinhard2002_local``)
       (eq. 9). Blurs mirror the image at its borders.
     * colour re-applied as ``C_d = (C / L)^saturation * L_d`` and clamped to [0, 1].
     * luminance from colour-science for the working space's primaries.
+    * evaluated by the fused numba kernels of ``reinhard2002_kernels.py`` (float32; blurs
+      are scipy's ``gaussian_filter(..., mode="mirror", truncate=4)`` kernels); the numpy
+      version they replaced is the test oracle, ``tests/reinhard2002_reference.py``.
 
 Tutorial variants (``..._tutorial``) reproduce the tutorial's MATLAB listing exactly,
 where it departs from the paper: luminance ``0.2125 R + 0.7154 G + 0.0721 B``; the local
