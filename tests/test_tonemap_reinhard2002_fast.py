@@ -23,7 +23,7 @@ from tests.test_tonemap_reinhard2002 import hdr_image
 # Output tolerance, absolute on display values in [0, 1]. Both sides are float32; the fast
 # side differs in summation order (blurs: float32 sums where scipy sums in float64, about
 # 1e-6 relative) and evaluates x^0.6 and ln with polynomials (about 2e-7 relative). Measured
-# worst case over these tests: 6e-7 (demo scene 1000 x 1500: 1.2e-6 is twice that).
+# worst case over these tests: 1.8e-7 (global) and 4.8e-7 (local, away from scale flips).
 ATOL = 2e-6
 
 
@@ -65,9 +65,10 @@ def test_local_matches_reference(name):
         reference = reference_local(rgb, **options)
         assert fast.dtype == np.float32 and fast.shape == rgb.shape
         flips = local_scale_flips(rgb, fast, reference)
-        # No pixel of these images sits within rounding of the threshold (measured: none);
-        # should one ever, it must stay a rare pixel, not a pattern.
-        assert len(flips) <= rgb.shape[0] * rgb.shape[1] // 10_000, flips[:5]
+        # Measured: 3 and 2 pixels of the 1.5 M of demo-1000x1500 (differences up to
+        # 0.032), none elsewhere. A flip must stay a rare pixel (<= 1 in 100,000), never
+        # a pattern.
+        assert len(flips) <= rgb.shape[0] * rgb.shape[1] // 100_000, flips[:5]
         mask = np.ones(rgb.shape[:2], dtype=bool)
         mask[tuple(flips.T)] = False
         np.testing.assert_allclose(fast[mask], reference[mask], rtol=0, atol=ATOL,
