@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
     results = {"command": "python -m benchmarks.tonemap " + " ".join(argv if argv is not None
                                                                       else sys.argv[1:]),
-               "environment": environment(), "numba_threads": _numba_threads(),
+               "environment": environment(), "threads": _kernel_threads(),
                "load_average_before": load_before, "load_average_after": load_after,
                "compile": compile_info, "targets_s": TARGETS_S, "rows": rows}
     text = json.dumps(results, indent=1) + "\n"
@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
               f"an empty cache, {compile_info['first_calls_s_warm_cache']:.2f} s from the "
               f"cache (import {compile_info['import_s_warm_cache']:.2f} s)")
     print(f"load average (1, 5, 15 min): before {_load(load_before)}, after "
-          f"{_load(load_after)} on {os.cpu_count()} CPUs; numba threads {_numba_threads()}")
+          f"{_load(load_after)} on {os.cpu_count()} CPUs; kernel threads {_kernel_threads()}")
     for name, target in TARGETS_S.items():
         big = next(r for r in rows if r["method"] == name)
         if big["megapixels"] >= 24.0:  # the targets are stated for 24 MP
@@ -221,10 +221,10 @@ def _load(values: tuple[float, float, float]) -> str:
     return ", ".join(f"{v:.2f}" for v in values)
 
 
-def _numba_threads() -> int:
-    import numba
+def _kernel_threads() -> int:
+    from hdrio.tonemap.reinhard2002_kernels import threads
 
-    return numba.get_num_threads()
+    return threads()
 
 
 if __name__ == "__main__":

@@ -165,7 +165,7 @@ def tonemap_Reinhard2002_local(rgb: np.ndarray, key: float = 0.18, phi: float = 
                         dtype=np.float32)  # eq. 7's 2^phi a / s^2, s = 1.6^i
     out = np.empty_like(rgb)
     kernels.local_operator(flat, out.reshape(-1), weights, L_m, table, radii, surround,
-                           np.float32(epsilon), float(saturation), kernels.threads())
+                           np.float32(epsilon), float(saturation))
     return out
 
 

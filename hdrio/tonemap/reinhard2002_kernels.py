@@ -14,12 +14,19 @@ the public entry point); this module only evaluates them fast on large images:
   vectorises; numba has no vectorised ``powf``/``logf`` without Intel's SVML.
 
 Everything is float32 except the log sum and the exponent arithmetic of ``x^s`` (float64).
-Kernels compile on first use and are cached on disk (``cache=True``).
+Kernels compile on first use and are cached on disk (``cache=True``). They are serial and
+release the GIL; the entry points at the end share blocks of pixels (or bands of rows)
+between threads (``HDRIO_THREADS``, default: the CPUs available). Plain threads rather
+than ``parallel=True``: the same speed here, half the compile time for the parallel
+wrappers, and sums that do not depend on the thread count.
 """
 
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -167,17 +174,13 @@ def _log_sum_block(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
     return total
 
 
-@numba.njit(parallel=True, **_JIT)
-def log_luminance_sum(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
-    """``sum(ln(delta + max(L, 0)))`` over the pixels of ``rgb`` (3N flat float32, ``L`` its
-    luminance with ``weights``), float64. Negative luminance counts as 0."""
+@numba.njit(**_JIT)
+def _log_sum_blocks(first: int, step: int, rgb: np.ndarray, weights: np.ndarray,
+                    delta: float, partial: np.ndarray) -> None:
     n = rgb.shape[0] // 3
-    blocks = (n + PIXEL_BLOCK - 1) // PIXEL_BLOCK
-    partial = np.zeros(blocks)
-    for b in numba.prange(blocks):
+    for b in range(first, partial.shape[0], step):
         stop = min(n, (b + 1) * PIXEL_BLOCK)
         partial[b] = _log_sum_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], weights, delta)
-    return partial.sum()
 
 
 @numba.njit(**_JIT)
@@ -198,21 +201,14 @@ def _global_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: 
         _colour(src, out[3 * p0: 3 * p1], weights, L_d[: p1 - p0], saturation)
 
 
-@numba.njit(parallel=True, **_JIT)
-def global_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: np.float32,
-                    use_white: bool, white_squared: np.float32, saturation: float) -> None:
-    """Eqs. 2-4 and the colour step from ``rgb`` into ``out`` (both 3N flat float32;
-    relative linear RGB in, display-linear [0, 1] out); ``scale = a / L_bar``; eq. 4 with
-    ``L_white^2 = white_squared`` if ``use_white``, else eq. 3.
-
-    Outputs are allocated by the caller with numpy, which asks Linux for huge pages: a
-    fresh 288 MB array from numba's allocator cost as much in page faults as the work.
-    """
+@numba.njit(**_JIT)
+def _global_blocks(first: int, step: int, rgb: np.ndarray, out: np.ndarray,
+                   weights: np.ndarray, scale: np.float32, use_white: bool,
+                   white_squared: np.float32, saturation: float) -> None:
     n = rgb.shape[0] // 3
-    for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
-        stop = min(n, (b + 1) * PIXEL_BLOCK)
-        start = 3 * b * PIXEL_BLOCK
-        _global_block(rgb[start: 3 * stop], out[start: 3 * stop], weights, scale, use_white,
+    for b in range(first, _blocks(n), step):
+        start, stop = 3 * b * PIXEL_BLOCK, 3 * min(n, (b + 1) * PIXEL_BLOCK)
+        _global_block(rgb[start:stop], out[start:stop], weights, scale, use_white,
                       white_squared, saturation)
 
 
@@ -223,12 +219,11 @@ def _scale_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
         out[p] = scale * _luminance(rgb, p, weights)
 
 
-@numba.njit(parallel=True, **_JIT)
-def scaled_luminance(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
-                     scale: np.float32) -> None:
-    """``L_m = scale L`` (eq. 2) from ``rgb`` (3N flat float32) into ``out`` (N float32)."""
+@numba.njit(**_JIT)
+def _scale_blocks(first: int, step: int, rgb: np.ndarray, out: np.ndarray,
+                  weights: np.ndarray, scale: np.float32) -> None:
     n = rgb.shape[0] // 3
-    for b in numba.prange((n + PIXEL_BLOCK - 1) // PIXEL_BLOCK):
+    for b in range(first, _blocks(n), step):
         stop = min(n, (b + 1) * PIXEL_BLOCK)
         _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[b * PIXEL_BLOCK: stop], weights,
                      scale)
@@ -366,29 +361,92 @@ def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.n
             saturation)
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(**_JIT)
+def _local_tiles(first: int, step: int, rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
+                 L_m: np.ndarray, kernels: np.ndarray, radii: np.ndarray,
+                 surround: np.ndarray, epsilon: np.float32, saturation: float) -> None:
+    height, width = L_m.shape
+    workspace = np.empty((4, TILE_ROWS, width), dtype=np.float32)  # once per thread
+    padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
+    open_ = np.empty(TILE_ROWS * width, dtype=np.bool_)
+    for tile in range(first, (height + TILE_ROWS - 1) // TILE_ROWS, step):
+        y0 = tile * TILE_ROWS
+        _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels, radii,
+                    surround, epsilon, saturation, workspace, padded, open_)
+
+
+@numba.njit(inline="always", **_JIT)
+def _blocks(pixels: int) -> int:
+    return (pixels + PIXEL_BLOCK - 1) // PIXEL_BLOCK
+
+
+# --- the entry points: split the blocks (or bands of rows) between threads -----------------
+
+def threads() -> int:
+    """Threads the kernels use: ``HDRIO_THREADS`` if set, else the CPUs this process may
+    run on."""
+    configured = os.environ.get("HDRIO_THREADS", "").strip()
+    if configured.isdigit() and int(configured) > 0:
+        return int(configured)
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def _on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
+    """``kernel(first, step, *args)`` for ``first`` in ``0 .. workers - 1``, one a thread:
+    worker ``k`` takes tasks ``k, k + workers, ...`` (interleaved, so cheap and costly
+    regions of the image are shared out evenly). The kernels release the GIL."""
+    workers = max(1, min(threads(), tasks))
+    if workers == 1:
+        kernel(0, 1, *args)
+        return
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio-tonemap") as pool:
+        for future in [pool.submit(kernel, k, workers, *args) for k in range(workers)]:
+            future.result()
+
+
+def log_luminance_sum(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
+    """``sum(ln(delta + max(L, 0)))`` over the pixels of ``rgb`` (3N flat float32, ``L`` its
+    luminance with ``weights``), float64. Negative luminance counts as 0. Partial sums
+    are added in block order: the result does not depend on the thread count."""
+    partial = np.zeros(_blocks(rgb.shape[0] // 3))
+    _on_threads(_log_sum_blocks, partial.shape[0], rgb, weights, float(delta), partial)
+    return float(partial.sum())
+
+
+def global_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: np.float32,
+                    use_white: bool, white_squared: np.float32, saturation: float) -> None:
+    """Eqs. 2-4 and the colour step from ``rgb`` into ``out`` (both 3N flat float32;
+    relative linear RGB in, display-linear [0, 1] out); ``scale = a / L_bar``; eq. 4 with
+    ``L_white^2 = white_squared`` if ``use_white``, else eq. 3.
+
+    Outputs are allocated by the caller with numpy, which asks Linux for huge pages: a
+    fresh 288 MB array from numba's allocator cost as much in page faults as the work.
+    """
+    _on_threads(_global_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale,
+                use_white, white_squared, saturation)
+
+
+def scaled_luminance(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
+                     scale: np.float32) -> None:
+    """``L_m = scale L`` (eq. 2) from ``rgb`` (3N flat float32) into ``out`` (N float32)."""
+    _on_threads(_scale_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale)
+
+
 def local_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
                    kernels: np.ndarray, radii: np.ndarray, surround: np.ndarray,
-                   epsilon: np.float32, saturation: float, threads: int) -> None:
+                   epsilon: np.float32, saturation: float) -> None:
     """Eqs. 5-9 and the colour step, a band of ``TILE_ROWS`` rows at a time.
 
     ``rgb`` and ``out`` are the H x W x 3 float32 images, flat (``out`` allocated by the
     caller, see :func:`global_operator`), ``L_m`` the H x W scaled luminance (eq. 2),
     ``kernels[i, :2 radii[i] + 1]`` the blur of scale ``i``, ``surround[i] = 2^phi a /
-    s_i^2``. Each of ``threads`` workers allocates its buffers once and takes every n-th
-    band (``numba.get_num_threads()`` here would keep the kernel out of the disk cache).
+    s_i^2``.
     """
-    height, width = L_m.shape
-    tiles = (height + TILE_ROWS - 1) // TILE_ROWS
-    workers = max(1, min(threads, tiles))
-    for worker in numba.prange(workers):
-        workspace = np.empty((4, TILE_ROWS, width), dtype=np.float32)
-        padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
-        open_ = np.empty(TILE_ROWS * width, dtype=np.bool_)
-        for tile in range(worker, tiles, workers):
-            y0 = tile * TILE_ROWS
-            _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels,
-                        radii, surround, epsilon, saturation, workspace, padded, open_)
+    bands = (L_m.shape[0] + TILE_ROWS - 1) // TILE_ROWS
+    _on_threads(_local_tiles, bands, rgb, out, weights, L_m, kernels, radii, surround,
+                epsilon, saturation)
 
 
 def gaussian_kernel_scipy(sigma: float, truncate: float = 4.0) -> np.ndarray:
@@ -402,7 +460,3 @@ def gaussian_kernel_scipy(sigma: float, truncate: float = 4.0) -> np.ndarray:
     phi = np.exp(-0.5 / (sigma * sigma) * x**2)
     return phi / phi.sum()
 
-
-def threads() -> int:
-    """numba's current thread count (``NUMBA_NUM_THREADS``, ``numba.set_num_threads``)."""
-    return numba.get_num_threads()
