@@ -123,6 +123,23 @@ def test_power_and_log_polynomials():
     np.testing.assert_allclose(logs, np.log(x[::50].astype(np.float64)), rtol=0, atol=2e-7)
 
 
+@pytest.mark.parametrize("operator", [tonemap_Reinhard2002_global, tonemap_Reinhard2002_local],
+                         ids=["global", "local"])
+def test_result_does_not_depend_on_thread_count(operator, monkeypatch):
+    # 3 blocks of 65536 pixels (the last partial) and 19 bands of 16 rows (the last
+    # partial) shared between 1, 2 and 3 threads.
+    rgb = demo(301, 500)
+    assert kernels.PIXEL_BLOCK == 65536 and kernels.TILE_ROWS == 16
+    results = []
+    for count in ("1", "2", "3"):
+        monkeypatch.setenv("HDRIO_THREADS", count)
+        assert kernels.threads() == int(count)
+        results.append(operator(rgb))
+    # Exact: each pixel and each partial sum is computed the same way whichever thread
+    # does it, and the key's partial sums are added in block order.
+    assert all(np.array_equal(results[0], other) for other in results[1:])
+
+
 def test_local_rejects_non_images():
     with pytest.raises(ValueError, match=r"\(height, width, 3\)"):
         tonemap_Reinhard2002_local(np.ones((10, 3), dtype=np.float32))

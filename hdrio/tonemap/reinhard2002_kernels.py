@@ -17,8 +17,8 @@ Everything is float32 except the log sum and the exponent arithmetic of ``x^s`` 
 Kernels compile on first use and are cached on disk (``cache=True``). They are serial and
 release the GIL; the entry points at the end share blocks of pixels (or bands of rows)
 between threads (``HDRIO_THREADS``, default: the CPUs available). Plain threads rather
-than ``parallel=True``: the same speed here, half the compile time for the parallel
-wrappers, and sums that do not depend on the thread count.
+than ``parallel=True``: the same speed here, less to compile, and results that do not
+depend on the thread count.
 """
 
 from __future__ import annotations
