@@ -141,11 +141,9 @@ def _luminance(rgb: np.ndarray, p: int, w: np.ndarray) -> np.float32:
 
 
 @numba.njit(inline="always", **_JIT)
-def _colour_channel(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_d: np.ndarray,
-                    saturation: float, c: int) -> None:
-    for p in range(L_d.shape[0]):
-        L = _luminance(rgb, p, weights)
-        out[3 * p + c] = _channel(rgb[3 * p + c], L, L_d[p], saturation)
+def _colour_channel(C: np.ndarray, L: np.ndarray, L_d: np.ndarray, saturation: float) -> None:
+    for p in range(C.shape[0]):
+        C[p] = _channel(C[p], L[p], L_d[p], saturation)
 
 
 @numba.njit(**_JIT)
@@ -153,16 +151,26 @@ def _colour(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_d: np.ndarr
             saturation: float) -> None:
     """The colour step for flat RGB ``rgb`` into ``out``, given ``L_d`` per pixel.
 
-    One loop per channel (with the channel a constant) in blocks that stay in cache:
-    that is the shape the compiler vectorises (one loop over all three does not).
+    A block at a time (it stays in cache): split the channels into contiguous buffers
+    (with the luminance), one loop per channel, then interleave them again. These are the
+    shapes the compiler vectorises; one loop over interleaved RGB is not vectorised, and
+    a strided store per channel becomes a slow scatter.
     """
     n = L_d.shape[0]
+    buffers = np.empty((4, min(n, _COLOUR_BLOCK)), dtype=np.float32)
     for p0 in range(0, n, _COLOUR_BLOCK):
         p1 = min(n, p0 + _COLOUR_BLOCK)
         src, dst, block = rgb[3 * p0: 3 * p1], out[3 * p0: 3 * p1], L_d[p0:p1]
-        _colour_channel(src, dst, weights, block, saturation, 0)
-        _colour_channel(src, dst, weights, block, saturation, 1)
-        _colour_channel(src, dst, weights, block, saturation, 2)
+        r, g, b, L = (buffers[0, : p1 - p0], buffers[1, : p1 - p0], buffers[2, : p1 - p0],
+                      buffers[3, : p1 - p0])
+        for p in range(p1 - p0):
+            r[p], g[p], b[p] = src[3 * p], src[3 * p + 1], src[3 * p + 2]
+            L[p] = _luminance(src, p, weights)
+        _colour_channel(r, L, block, saturation)
+        _colour_channel(g, L, block, saturation)
+        _colour_channel(b, L, block, saturation)
+        for p in range(p1 - p0):
+            dst[3 * p], dst[3 * p + 1], dst[3 * p + 2] = r[p], g[p], b[p]
 
 
 @numba.njit(**_JIT, fastmath={"reassoc"})
