@@ -19,6 +19,11 @@ release the GIL; the entry points at the end share blocks of pixels (or bands of
 between threads (``HDRIO_THREADS``, default: the CPUs available). Plain threads rather
 than ``parallel=True``: the same speed here, less to compile, and results that do not
 depend on the thread count.
+
+One file on purpose, although it is long: numba's disk cache is invalidated only by a
+change to the file that defines the cached function, not to functions it calls from
+other files (numba's "Notes on Caching", limitations), so a kernel and everything it
+inlines live together.
 """
 
 from __future__ import annotations
