@@ -188,12 +188,12 @@ def _log_sum_block(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
 
 
 @numba.njit(**_JIT)
-def _log_sum_blocks(first: int, step: int, rgb: np.ndarray, weights: np.ndarray,
+def _log_sum_blocks(start: int, stop: int, rgb: np.ndarray, weights: np.ndarray,
                     delta: float, partial: np.ndarray) -> None:
     n = rgb.shape[0] // 3
-    for b in range(first, partial.shape[0], step):
-        stop = min(n, (b + 1) * PIXEL_BLOCK)
-        partial[b] = _log_sum_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], weights, delta)
+    for b in range(start, stop):
+        end = min(n, (b + 1) * PIXEL_BLOCK)
+        partial[b] = _log_sum_block(rgb[3 * b * PIXEL_BLOCK: 3 * end], weights, delta)
 
 
 @numba.njit(**_JIT)
@@ -215,13 +215,13 @@ def _global_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale: 
 
 
 @numba.njit(**_JIT)
-def _global_blocks(first: int, step: int, rgb: np.ndarray, out: np.ndarray,
+def _global_blocks(start: int, stop: int, rgb: np.ndarray, out: np.ndarray,
                    weights: np.ndarray, scale: np.float32, use_white: bool,
                    white_squared: np.float32, saturation: float) -> None:
     n = rgb.shape[0] // 3
-    for b in range(first, _blocks(n), step):
-        start, stop = 3 * b * PIXEL_BLOCK, 3 * min(n, (b + 1) * PIXEL_BLOCK)
-        _global_block(rgb[start:stop], out[start:stop], weights, scale, use_white,
+    for b in range(start, stop):
+        begin, end = 3 * b * PIXEL_BLOCK, 3 * min(n, (b + 1) * PIXEL_BLOCK)
+        _global_block(rgb[begin:end], out[begin:end], weights, scale, use_white,
                       white_squared, saturation)
 
 
@@ -233,12 +233,12 @@ def _scale_block(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
 
 
 @numba.njit(**_JIT)
-def _scale_blocks(first: int, step: int, rgb: np.ndarray, out: np.ndarray,
+def _scale_blocks(start: int, stop: int, rgb: np.ndarray, out: np.ndarray,
                   weights: np.ndarray, scale: np.float32) -> None:
     n = rgb.shape[0] // 3
-    for b in range(first, _blocks(n), step):
-        stop = min(n, (b + 1) * PIXEL_BLOCK)
-        _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * stop], out[b * PIXEL_BLOCK: stop], weights,
+    for b in range(start, stop):
+        end = min(n, (b + 1) * PIXEL_BLOCK)
+        _scale_block(rgb[3 * b * PIXEL_BLOCK: 3 * end], out[b * PIXEL_BLOCK: end], weights,
                      scale)
 
 
@@ -375,14 +375,14 @@ def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.n
 
 
 @numba.njit(**_JIT)
-def _local_tiles(first: int, step: int, rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
+def _local_tiles(start: int, stop: int, rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
                  L_m: np.ndarray, kernels: np.ndarray, radii: np.ndarray,
                  surround: np.ndarray, epsilon: np.float32, saturation: float) -> None:
     height, width = L_m.shape
-    workspace = np.empty((4, TILE_ROWS, width), dtype=np.float32)  # once per thread
+    workspace = np.empty((4, TILE_ROWS, width), dtype=np.float32)  # once per chunk
     padded = np.empty(width + 2 * radii.max(), dtype=np.float32)
     open_ = np.empty(TILE_ROWS * width, dtype=np.bool_)
-    for tile in range(first, (height + TILE_ROWS - 1) // TILE_ROWS, step):
+    for tile in range(start, stop):
         y0 = tile * TILE_ROWS
         _local_tile(rgb, out, weights, L_m, y0, min(TILE_ROWS, height - y0), kernels, radii,
                     surround, epsilon, saturation, workspace, padded, open_)
@@ -407,15 +407,21 @@ def threads() -> int:
 
 
 def _on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
-    """``kernel(first, step, *args)`` for ``first`` in ``0 .. workers - 1``, one a thread:
-    worker ``k`` takes tasks ``k, k + workers, ...`` (interleaved, so cheap and costly
-    regions of the image are shared out evenly). The kernels release the GIL."""
+    """``kernel(start, stop, *args)`` over tasks ``0 .. tasks - 1``, in chunks of
+    consecutive tasks (eight per thread) that the threads take from a queue as they
+    finish: on a machine shared with other work, a thread that gets less CPU simply takes
+    fewer chunks (a fixed half each left the call waiting on the slower thread). The
+    kernels release the GIL."""
     workers = max(1, min(threads(), tasks))
     if workers == 1:
-        kernel(0, 1, *args)
+        kernel(0, tasks, *args)
         return
+    chunks = min(tasks, 8 * workers)
+    bounds = [tasks * k // chunks for k in range(chunks + 1)]
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio-tonemap") as pool:
-        for future in [pool.submit(kernel, k, workers, *args) for k in range(workers)]:
+        futures = [pool.submit(kernel, start, stop, *args)
+                   for start, stop in zip(bounds[:-1], bounds[1:])]
+        for future in futures:
             future.result()
 
 
