@@ -14,6 +14,9 @@ Paper variants (``tonemap_Reinhard2002_global``, ``tonemap_Reinhard2002_local``)
       (eq. 9). Blurs mirror the image at its borders.
     * colour re-applied as ``C_d = (C / L)^saturation * L_d`` and clamped to [0, 1].
     * luminance from colour-science for the working space's primaries.
+    * evaluated by the fused numba kernels of ``reinhard2002_kernels.py`` (float32; blurs
+      are scipy's ``gaussian_filter(..., mode="mirror", truncate=4)`` kernels); the numpy
+      version they replaced is the test oracle, ``tests/reinhard2002_reference.py``.
 
 Tutorial variants (``..._tutorial``) reproduce the tutorial's MATLAB listing exactly,
 where it departs from the paper: luminance ``0.2125 R + 0.7154 G + 0.0721 B``; the local
@@ -37,7 +40,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance
+from hdrio.cms.luminance import DEFAULT_SPACE, luminance_weights
 
 DELTA = 1e-4
 SCALE_RATIO = 1.6
@@ -46,36 +49,53 @@ ALPHA_1 = 1.0 / (2.0 * math.sqrt(2.0))
 TUTORIAL_LUMINANCE = (0.2125, 0.7154, 0.0721)
 
 
-def log_average_luminance(L: np.ndarray, delta: float = DELTA) -> float:
-    """The key of the scene, ``exp(mean(ln(delta + L)))`` (the paper's eq. 1).
+def _pixels(rgb: np.ndarray, operator: str) -> np.ndarray:
+    """``rgb`` as C-contiguous float32 ``(..., 3)`` (no copy when it already is one)."""
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    if rgb.ndim == 0 or rgb.shape[-1] != 3:
+        raise ValueError(f"{operator} takes RGB pixels (..., 3), got shape {rgb.shape}")
+    return rgb
 
-    Negative luminance (radiance maps can hold small negatives) counts as 0, so one such
-    pixel cannot turn the key, and with it the whole image, into NaN.
-    """
-    return float(np.exp(np.mean(np.log(delta + np.maximum(L.astype(np.float64), 0.0)))))
 
+def _scene_key_scale(flat: np.ndarray, weights: np.ndarray, key: float, delta: float
+                     ) -> np.float32:
+    """``a / L_bar`` (eqs. 1 and 2) for flat float32 RGB; ``L_bar = exp(mean(ln(delta +
+    L)))``, negative luminance counted as 0 (one noisy pixel cannot make it NaN)."""
+    from hdrio.tonemap import reinhard2002_kernels as kernels  # numba: imported on use
 
-def _reapply_colour(rgb: np.ndarray, L: np.ndarray, L_d: np.ndarray, saturation: float
-                    ) -> np.ndarray:
-    """``(C / L)^saturation * L_d`` clamped to [0, 1]; black where ``L <= 0``."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(L[..., None] > 0, rgb / L[..., None], 0.0)
-    ratio = np.maximum(ratio, 0.0)
-    return np.clip(ratio**saturation * L_d[..., None], 0.0, 1.0).astype(np.float32)
+    pixels = max(1, flat.size // 3)
+    L_bar = math.exp(kernels.log_luminance_sum(flat, weights, float(delta)) / pixels)
+    return np.float32(key / L_bar)
 
 
 def tonemap_Reinhard2002_global(rgb: np.ndarray, key: float = 0.72, saturation: float = 0.6,
                                 white: float | None = None, delta: float = DELTA,
                                 space: str = DEFAULT_SPACE) -> np.ndarray:
-    """The global operator (eqs. 1-4). ``key`` is ``a``; ``white`` enables eq. 4."""
-    rgb = np.asarray(rgb, dtype=np.float32)
-    L = luminance(rgb, space)
-    L_m = (key / log_average_luminance(L, delta)) * L
-    if white is None:
-        L_d = L_m / (1.0 + L_m)
-    else:
-        L_d = L_m * (1.0 + L_m / white**2) / (1.0 + L_m)
-    return _reapply_colour(rgb, L, L_d, saturation)
+    """The global operator (eqs. 1-4). ``key`` is ``a``; ``white`` enables eq. 4.
+
+    Parameters
+    ----------
+    rgb
+        Linear RGB ``(..., 3)`` in ``space``, relative or absolute radiance (any scale).
+    key, saturation, white, delta
+        ``a``, the colour exponent, ``L_white`` (in units of ``L_m``), the log offset.
+
+    Returns
+    -------
+    numpy.ndarray
+        Display-linear float32 RGB in [0, 1], the shape of ``rgb``.
+    """
+    from hdrio.tonemap import reinhard2002_kernels as kernels
+
+    rgb = _pixels(rgb, "tonemap_Reinhard2002_global")
+    flat = rgb.reshape(-1)
+    weights = np.asarray(luminance_weights(space), dtype=np.float32)
+    scale = _scene_key_scale(flat, weights, key, delta)
+    white_squared = np.float32(0.0 if white is None else white**2)
+    out = np.empty_like(rgb)
+    kernels.global_operator(flat, out.reshape(-1), weights, scale, white is not None,
+                            white_squared, float(saturation))
+    return out
 
 
 def _adapting_luminance(L: np.ndarray, blur: Callable[[np.ndarray, float], np.ndarray],
@@ -102,19 +122,51 @@ def _adapting_luminance(L: np.ndarray, blur: Callable[[np.ndarray, float], np.nd
     return chosen
 
 
-def _gaussian_mirrored(image: np.ndarray, sigma: float) -> np.ndarray:
-    return scipy.ndimage.gaussian_filter(image, sigma, mode="mirror", truncate=4.0)
-
-
 def tonemap_Reinhard2002_local(rgb: np.ndarray, key: float = 0.18, phi: float = 8.0,
                                epsilon: float = 0.05, saturation: float = 0.6,
                                delta: float = DELTA, space: str = DEFAULT_SPACE) -> np.ndarray:
-    """The local dodging-and-burning operator (eqs. 1, 2, 5-9), ``key`` is ``a``."""
-    rgb = np.asarray(rgb, dtype=np.float32)
-    L = luminance(rgb, space)
-    L_m = ((key / log_average_luminance(L, delta)) * L).astype(np.float32)
-    V1 = _adapting_luminance(L_m, _gaussian_mirrored, key, phi, epsilon, lambda s: s)
-    return _reapply_colour(rgb, L, L_m / (1.0 + V1), saturation)
+    """The local dodging-and-burning operator (eqs. 1, 2, 5-9), ``key`` is ``a``.
+
+    Blurs are ``scipy.ndimage.gaussian_filter(L_m, sigma, mode="mirror", truncate=4)``
+    kernels, evaluated by the fused tile kernel of
+    :mod:`hdrio.tonemap.reinhard2002_kernels` (float32 sums: within about 1e-6 of scipy).
+
+    Parameters
+    ----------
+    rgb
+        Linear RGB image ``(height, width, 3)`` in ``space``, relative or absolute radiance.
+    key, phi, epsilon, saturation, delta
+        ``a``, the sharpening ``phi``, the activity threshold, the colour exponent, the
+        log offset of the key.
+
+    Returns
+    -------
+    numpy.ndarray
+        Display-linear float32 RGB in [0, 1], ``(height, width, 3)``.
+    """
+    from hdrio.tonemap import reinhard2002_kernels as kernels
+
+    rgb = _pixels(rgb, "tonemap_Reinhard2002_local")
+    if rgb.ndim != 3:
+        raise ValueError(f"tonemap_Reinhard2002_local takes an image (height, width, 3), "
+                         f"got shape {rgb.shape}")
+    height, width = rgb.shape[:2]
+    flat = rgb.reshape(-1)
+    weights = np.asarray(luminance_weights(space), dtype=np.float32)
+    scale = _scene_key_scale(flat, weights, key, delta)
+    L_m = np.empty((height, width), dtype=np.float32)
+    kernels.scaled_luminance(flat, L_m.reshape(-1), weights, scale)
+    blurs = [kernels.gaussian_kernel_scipy(ALPHA_1 * SCALE_RATIO**i) for i in range(SCALES + 1)]
+    radii = np.array([len(b) // 2 for b in blurs], dtype=np.int64)
+    table = np.zeros((len(blurs), 2 * int(radii.max()) + 1), dtype=np.float32)
+    for i, blur in enumerate(blurs):
+        table[i, : len(blur)] = blur
+    surround = np.array([2.0**phi * key / (SCALE_RATIO**i) ** 2 for i in range(SCALES)],
+                        dtype=np.float32)  # eq. 7's 2^phi a / s^2, s = 1.6^i
+    out = np.empty_like(rgb)
+    kernels.local_operator(flat, out.reshape(-1), weights, L_m, table, radii, surround,
+                           np.float32(epsilon), float(saturation))
+    return out
 
 
 def fspecial_gaussian(sigma: float) -> np.ndarray:
