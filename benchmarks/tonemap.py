@@ -38,6 +38,7 @@ from benchmarks.truth import DEFAULT_OUT
 from benchmarks.truth.harness import environment
 from benchmarks.truth.memory import PeakMemory
 from benchmarks.truth.scenes import REPO_ROOT
+from hdrio.io.write import write_text
 from hdrio.synthetic import demo_scene
 from hdrio.tonemap.reinhard2002 import (
     tonemap_Reinhard2002_global,
@@ -196,9 +197,7 @@ def main(argv: list[str] | None = None) -> int:
                "load_average_before": load_before, "load_average_after": load_after,
                "compile": compile_info, "targets_s": TARGETS_S, "rows": rows}
     text = json.dumps(results, indent=1) + "\n"
-    temp = args.json.with_name(f".{args.json.name}.partial")
-    temp.write_text(text)
-    os.replace(temp, args.json)  # atomic: no half-written JSON
+    write_text(args.json, text)  # atomic: no half-written JSON
     print()
     print(table(rows))
     if compile_info:

@@ -123,6 +123,33 @@ def breakdown(rows: list[dict], methods: list[str], by: str) -> list[str]:
     return lines
 
 
+def full_run(rows: list[dict], methods: list[str], peers: list[str]) -> list[str]:
+    """Every method over all the stacks every peer ran on: the run's headline numbers.
+
+    Per-stack medians and 99th percentiles of the well-exposed error, summarised over the
+    stacks by their median, their mean and their worst (max).
+    """
+    stacks = {r["stack"] for r in ok_rows(rows)}
+    for peer in peers:
+        stacks &= {r["stack"] for r in ok_rows(rows, method=peer)}
+    if not stacks:
+        return []
+    lines = [f"### Full run: the {len(stacks)} stacks every peer ran on", "",
+             "| method | median err % | median p99 % | mean p99 % | max p99 % |",
+             "|---|---|---|---|---|"]
+    for method in methods:
+        chosen = [r for r in ok_rows(rows, method=method) if r["stack"] in stacks]
+        if len(chosen) != len(stacks):
+            continue
+        medians = _values(chosen, lambda r: r["well"]["median"])
+        p99s = _values(chosen, lambda r: r["well"]["p99"])
+        if not p99s:
+            continue
+        lines.append(f"| {method} | {_pct(_median(medians))} | {_pct(_median(p99s))} | "
+                     f"{_pct(sum(p99s) / len(p99s))} | {_pct(max(p99s))} |")
+    return lines + [""]
+
+
 def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
     rows, env, config = results["rows"], results["environment"], results["config"]
     methods = [m["name"] for m in results["methods"]]
@@ -143,6 +170,7 @@ def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
             "docs/accuracy.md) use the same scale. "
             "*oracle* is hdrio's merge given the true response (a reference, not a method).",
             ""]
+    out += full_run(rows, methods, peers)
     for group, title in GROUPS:
         subset = [r for r in rows if r["group"] == group]
         if not subset:
