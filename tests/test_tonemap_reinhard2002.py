@@ -260,3 +260,12 @@ def test_registry_resolves_names_case_insensitively():
     message = str(info.value)
     assert "drago" in message
     assert all(name in message for name in ("reinhard-global", "reinhard-local-tutorial"))
+
+
+def test_log_average_luminance_is_eq_1_with_negatives_counted_as_zero():
+    from hdrio.tonemap.reinhard2002 import log_average_luminance
+
+    L = np.array([[0.01, 1.0], [100.0, -5.0]])
+    # rtol 1e-12: the same float64 formula written out.
+    expected = np.exp(np.mean(np.log(1e-4 + np.array([0.01, 1.0, 100.0, 0.0]))))
+    np.testing.assert_allclose(log_average_luminance(L), expected, rtol=1e-12)

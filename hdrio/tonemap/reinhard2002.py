@@ -57,6 +57,13 @@ def _pixels(rgb: np.ndarray, operator: str) -> np.ndarray:
     return rgb
 
 
+def log_average_luminance(L: np.ndarray, delta: float = DELTA) -> float:
+    """Eq. 1, the scene's key: ``exp(mean(ln(delta + L)))`` over luminance ``L`` (any
+    shape), negative luminance counted as 0."""
+    L = np.asarray(L, dtype=np.float64)
+    return float(np.exp(np.mean(np.log(delta + np.maximum(L, 0.0)))))
+
+
 def _scene_key_scale(flat: np.ndarray, weights: np.ndarray, key: float, delta: float
                      ) -> np.float32:
     """``a / L_bar`` (eqs. 1 and 2) for flat float32 RGB; ``L_bar = exp(mean(ln(delta +
