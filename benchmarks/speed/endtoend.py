@@ -95,7 +95,7 @@ def run(stack: ExposureStack, repeats: int, counts: tuple[int, ...] = (5, 7, 9))
         rows.append({"row": "end to end", "method": "I/O floor (decode JPEGs + write EXR)",
                      "seconds": floor.seconds, "peak_mb": floor.peak_mb})
         rows.append({"row": "end to end", "method": f"hdrio merge ({stack.count} JPEGs)",
-                     "seconds": hdrio.seconds, "peak_mb": hdrio.peak_mb,
+                     "end_to_end": "hdrio", "seconds": hdrio.seconds, "peak_mb": hdrio.peak_mb,
                      "steps": {k: round(v, 3) for k, v in timings.items()}})
         radiance = None
         for count in counts:
