@@ -16,13 +16,13 @@ from pathlib import Path
 
 import colour
 import numpy as np
-import OpenImageIO as oiio
 
 from benchmarks.truth.scenes import data_folder
 from hdrio.cms import spaces
 from hdrio.cms.calibration import Calibration
 from hdrio.cms.luminance import luminance
 from hdrio.cms.lut import export_response
+from hdrio.imageops import read_image
 from hdrio.io.brackets import read_codes
 from hdrio.pipeline import MergeOptions, merge_files
 
@@ -32,11 +32,7 @@ TARGETS = (("ACEScg", "ACEScg"), ("ACES2065-1", "ACES2065-1"),
 
 
 def _read(path: Path) -> np.ndarray:
-    image = oiio.ImageInput.open(str(path))
-    try:
-        return np.asarray(image.read_image("float"), dtype=np.float64)
-    finally:
-        image.close()
+    return read_image(path)[0].astype(np.float64)
 
 
 def _relative(a: np.ndarray, b: np.ndarray) -> float:

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import colour
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
 from hdrio.cms import spaces
 from hdrio.errors import HdrioError
+from hdrio.imageops import read_image
 from hdrio.io.header import read_header
 from hdrio.pipeline import MergeOptions, merge_files
 
@@ -108,11 +108,7 @@ def _merge(brackets: list[Path], output: Path, space: str):
 
 
 def _pixels(path: Path) -> np.ndarray:
-    image = oiio.ImageInput.open(str(path))
-    try:
-        return np.asarray(image.read_image("float"), dtype=np.float64)
-    finally:
-        image.close()
+    return read_image(path)[0].astype(np.float64)
 
 
 def test_acescg_merge_reads_back_as_acescg_and_converts_back_to_rec709(write_brackets,
