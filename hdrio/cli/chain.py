@@ -176,7 +176,7 @@ def load_operations() -> None:
 
     A new family of operations (colour management, say) adds its module here.
     """
-    from hdrio.cli import chain_ops, chain_output, chain_pictures  # noqa: F401
+    from hdrio.cli import chain_colour, chain_ops, chain_output, chain_pictures  # noqa: F401
 
 
 def run_steps(chain: Chain, steps: Sequence[Step]) -> None:

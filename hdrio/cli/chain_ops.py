@@ -156,7 +156,13 @@ def _merge(chain: Chain, domain: str) -> None:
                          response=settings.get("response_from"))
     chain.brackets = []
     chain.last_merge = result
-    chain.images.append(Image(result.radiance, exr_attributes(result),
+    radiance = result.radiance
+    if result.colour is not None:  # the input encoding's primaries -> the working space
+        from hdrio.cms.stage import output_radiance
+
+        radiance = output_radiance(radiance, result.colour, options.output_space,
+                                   options.ocio_config)
+    chain.images.append(Image(radiance, exr_attributes(result),
                               f"merge of {stack.count} brackets"))
 
 
