@@ -14,7 +14,8 @@ DEFAULT_SPACE = "ITU-R BT.709"
 
 
 @lru_cache(maxsize=16)
-def _space(name: str):
+def rgb_colourspace(name: str):
+    """colour-science's ``RGB_Colourspace`` called ``name`` (cached; a clear error if unknown)."""
     import colour
 
     try:
@@ -32,7 +33,7 @@ def luminance_weights(space: str = DEFAULT_SPACE) -> tuple[float, float, float]:
     """
     import colour
 
-    colourspace = _space(space)
+    colourspace = rgb_colourspace(space)
     matrix = colour.normalised_primary_matrix(colourspace.primaries, colourspace.whitepoint)
     return tuple(float(v) for v in matrix[1])
 
@@ -46,7 +47,7 @@ def luminance(rgb: np.ndarray, space: str = DEFAULT_SPACE) -> np.ndarray:
 @lru_cache(maxsize=16)
 def rgb_chromaticities(space: str = DEFAULT_SPACE) -> tuple[float, ...]:
     """OpenEXR ``chromaticities``: red, green, blue and white ``x, y`` (8 floats)."""
-    colourspace = _space(space)
+    colourspace = rgb_colourspace(space)
     primaries = np.asarray(colourspace.primaries, dtype=np.float64).reshape(-1)
     white = np.asarray(colourspace.whitepoint, dtype=np.float64)
     return tuple(float(v) for v in (*primaries, *white))

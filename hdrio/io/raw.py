@@ -173,9 +173,9 @@ def xyz_to_working(xyz: np.ndarray, space: str) -> np.ndarray:
     """
     import colour
 
-    from hdrio.cms.luminance import _space
+    from hdrio.cms.luminance import rgb_colourspace
 
     d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
-    rgb = colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), _space(space), d65,
+    rgb = colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), rgb_colourspace(space), d65,
                             chromatic_adaptation_transform="CAT02")
     return np.asarray(rgb, dtype=np.float32)
