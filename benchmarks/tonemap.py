@@ -221,7 +221,7 @@ def _load(values: tuple[float, float, float]) -> str:
 
 
 def _kernel_threads() -> int:
-    from hdrio.tonemap.reinhard2002_kernels import threads
+    from hdrio.parallel import threads
 
     return threads()
 

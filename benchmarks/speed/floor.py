@@ -2,21 +2,23 @@
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
+from hdrio.parallel import on_threads
 
-def parallel_copy(source: np.ndarray, destination: np.ndarray,
-                  threads: int | None = None) -> None:
-    """Copy ``source`` into ``destination`` in ``threads`` slabs along the first axis
-    that has enough rows (NumPy releases the GIL while copying, so the slabs run at once)."""
-    threads = threads or os.cpu_count() or 1
+COPY_BLOCK = 1 << 22
+"""Bytes per task (4 MB), as the merge's own blocks."""
+
+
+def parallel_copy(source: np.ndarray, destination: np.ndarray) -> None:
+    """Copy ``source`` into ``destination`` in blocks spread over hdrio's threads
+    (:func:`hdrio.parallel.on_threads`; NumPy releases the GIL while copying)."""
     flat_source = source.reshape(-1)
     flat_destination = destination.reshape(-1)
-    bounds = np.linspace(0, flat_source.size, threads + 1).astype(np.int64)
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(lambda k: np.copyto(flat_destination[bounds[k]: bounds[k + 1]],
-                                          flat_source[bounds[k]: bounds[k + 1]]),
-                      range(threads)))
+    step = max(1, COPY_BLOCK // flat_source.itemsize)
+
+    def blocks(first: int, last: int) -> None:
+        np.copyto(flat_destination[first * step: last * step],
+                  flat_source[first * step: last * step])
+
+    on_threads(blocks, -(-flat_source.size // step))

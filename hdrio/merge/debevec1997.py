@@ -34,10 +34,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from hdrio.merge.kernel import MAX_BRACKETS, exp_in_place, merge_kernel
 from hdrio.merge.weighting import weights_table
+from hdrio.parallel import threads
 from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
@@ -107,6 +109,8 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     used_rows = np.zeros((height, count), dtype=np.int64)
     clipped_rows = np.zeros(height, dtype=np.int64)
     black_rows = np.zeros(height, dtype=np.int64)
+    # The same thread count as every other kernel (HDRIO_THREADS, else the CPUs we have).
+    numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
     merge_kernel(np.ascontiguousarray(stack.codes), weighted_c, estimates_c, weights_c,
                  stack.code_max, saturation == "channel", domain == "log",
                  radiance, used_rows, clipped_rows, black_rows)

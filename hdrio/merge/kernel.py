@@ -25,11 +25,11 @@ Compiled by numba on first use and cached on disk beside this module (or in
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit, prange
+
+from hdrio.parallel import on_threads
 
 MAX_BRACKETS = 64
 """The kernel records which brackets a pixel used as bits of one 64-bit word."""
@@ -96,22 +96,21 @@ def merge_kernel(codes, weighted, estimates, weights, code_max, per_channel, log
             black_rows[y] += black
 
 
-def exp_in_place(values: np.ndarray, threads: int | None = None) -> None:
-    """``values = exp(values)`` for float32 ``values``, in slabs on every core.
+EXP_BLOCK = 1 << 20
+"""Values per task of :func:`exp_in_place` (4 MB of float32)."""
 
-    NumPy's float32 ``exp`` is vectorised (SIMD) and releases the GIL, so slabs in a
-    thread pool run at once; numba's would be a scalar libm call per value.
+
+def exp_in_place(values: np.ndarray) -> None:
+    """``values = exp(values)`` for float32 ``values``, in blocks on every core.
+
+    NumPy's float32 ``exp`` is vectorised (SIMD) and releases the GIL, so blocks run at
+    once on :func:`hdrio.parallel.on_threads`; numba's would be a scalar libm call per
+    value.
     """
-    threads = threads or os.cpu_count() or 1
     flat = values.reshape(-1)
-    bounds = np.linspace(0, flat.size, threads + 1).astype(np.int64)
 
-    def slab(k: int) -> None:
-        part = flat[bounds[k]: bounds[k + 1]]
+    def blocks(first: int, last: int) -> None:
+        part = flat[first * EXP_BLOCK: last * EXP_BLOCK]
         np.exp(part, out=part)
 
-    if threads == 1:
-        slab(0)
-        return
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(slab, range(threads)))
+    on_threads(blocks, -(-flat.size // EXP_BLOCK))

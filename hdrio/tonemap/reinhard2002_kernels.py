@@ -29,15 +29,14 @@ inlines live together.
 from __future__ import annotations
 
 import math
-import os
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
 from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
+
+from hdrio.parallel import on_threads
 
 TILE_ROWS = 16  # rows per tile of the local operator: 16 x 6000 float32 = 384 KB a buffer
 COLUMN_BLOCK = 1024  # columns per block of the vertical blur: (2 r + 1) x 4 KB stays in L2
@@ -395,42 +394,12 @@ def _blocks(pixels: int) -> int:
 
 # --- the entry points: split the blocks (or bands of rows) between threads -----------------
 
-def threads() -> int:
-    """Threads the kernels use: ``HDRIO_THREADS`` if set, else the CPUs this process may
-    run on."""
-    configured = os.environ.get("HDRIO_THREADS", "").strip()
-    if configured.isdigit() and int(configured) > 0:
-        return int(configured)
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
-
-
-def _on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
-    """``kernel(start, stop, *args)`` over tasks ``0 .. tasks - 1``, in chunks of
-    consecutive tasks (eight per thread) that the threads take from a queue as they
-    finish: on a machine shared with other work, a thread that gets less CPU simply takes
-    fewer chunks (a fixed half each left the call waiting on the slower thread). The
-    kernels release the GIL."""
-    workers = max(1, min(threads(), tasks))
-    if workers == 1:
-        kernel(0, tasks, *args)
-        return
-    chunks = min(tasks, 8 * workers)
-    bounds = [tasks * k // chunks for k in range(chunks + 1)]
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio-tonemap") as pool:
-        futures = [pool.submit(kernel, start, stop, *args)
-                   for start, stop in zip(bounds[:-1], bounds[1:])]
-        for future in futures:
-            future.result()
-
-
 def log_luminance_sum(rgb: np.ndarray, weights: np.ndarray, delta: float) -> float:
     """``sum(ln(delta + max(L, 0)))`` over the pixels of ``rgb`` (3N flat float32, ``L`` its
     luminance with ``weights``), float64. Negative luminance counts as 0. Partial sums
     are added in block order: the result does not depend on the thread count."""
     partial = np.zeros(_blocks(rgb.shape[0] // 3))
-    _on_threads(_log_sum_blocks, partial.shape[0], rgb, weights, float(delta), partial)
+    on_threads(_log_sum_blocks, partial.shape[0], rgb, weights, float(delta), partial)
     return float(partial.sum())
 
 
@@ -443,14 +412,14 @@ def global_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, scale
     Outputs are allocated by the caller with numpy, which asks Linux for huge pages: a
     fresh 288 MB array from numba's allocator cost as much in page faults as the work.
     """
-    _on_threads(_global_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale,
+    on_threads(_global_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale,
                 use_white, white_squared, saturation)
 
 
 def scaled_luminance(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray,
                      scale: np.float32) -> None:
     """``L_m = scale L`` (eq. 2) from ``rgb`` (3N flat float32) into ``out`` (N float32)."""
-    _on_threads(_scale_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale)
+    on_threads(_scale_blocks, _blocks(rgb.shape[0] // 3), rgb, out, weights, scale)
 
 
 def local_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.ndarray,
@@ -464,7 +433,7 @@ def local_operator(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: n
     s_i^2``.
     """
     bands = (L_m.shape[0] + TILE_ROWS - 1) // TILE_ROWS
-    _on_threads(_local_tiles, bands, rgb, out, weights, L_m, kernels, radii, surround,
+    on_threads(_local_tiles, bands, rgb, out, weights, L_m, kernels, radii, surround,
                 epsilon, saturation)
 
 

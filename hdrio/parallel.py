@@ -1,0 +1,37 @@
+"""How many threads hdrio's kernels use, and one way to spread work over them."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+
+def threads() -> int:
+    """Threads the kernels use: ``HDRIO_THREADS`` if set, else the CPUs this process may
+    run on."""
+    configured = os.environ.get("HDRIO_THREADS", "").strip()
+    if configured.isdigit() and int(configured) > 0:
+        return int(configured)
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
+    """``kernel(start, stop, *args)`` over tasks ``0 .. tasks - 1``, in chunks of
+    consecutive tasks (eight per thread) that the threads take from a queue as they
+    finish: on a machine shared with other work, a thread that gets less CPU simply takes
+    fewer chunks (a fixed half each left the call waiting on the slower thread). The
+    kernels must release the GIL (numba ``nogil``, NumPy ufuncs, copies)."""
+    workers = max(1, min(threads(), tasks))
+    if workers == 1:
+        kernel(0, tasks, *args)
+        return
+    chunks = min(tasks, 8 * workers)
+    bounds = [tasks * k // chunks for k in range(chunks + 1)]
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio") as pool:
+        futures = [pool.submit(kernel, start, stop, *args)
+                   for start, stop in zip(bounds[:-1], bounds[1:])]
+        for future in futures:
+            future.result()
