@@ -18,7 +18,7 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 def merge_reference(stack, response, weighting="Debevec1997", domain="log",
                     saturation="channel"):
-    """Radiance ``(H, W, C)`` float32 and ``(clipped, black, used_per_bracket)``."""
+    """Radiance ``(H, W, C)`` float32 and ``(clipped, black)`` pixel counts."""
     count, height, width, channels = stack.codes.shape
     weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
     tables = estimate_tables(response, stack.exposures, domain)
@@ -27,7 +27,6 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
     denominator = np.zeros((height, width, channels))
     dropped = np.zeros((height, width, channels), dtype=bool)
     fallback = None
-    used = []
     for j in range(count):
         codes = stack.codes[j].astype(np.int64)
         saturated = codes == stack.code_max
@@ -40,7 +39,6 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         numerator += weight * estimate
         denominator += weight
         fallback = estimate if fallback is None else np.where(keep, estimate, fallback)
-        used.append(int(np.count_nonzero(np.any(weight > 0, axis=-1))))
         if j == 0:
             clipped = int(np.count_nonzero(np.any(codes == stack.code_max, axis=-1)))
     black = int(np.count_nonzero(np.all(stack.codes[-1] == 0, axis=-1)))
@@ -49,4 +47,4 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         if domain == "log":
             merged = np.exp(np.minimum(merged, np.log(FLOAT32_MAX)))
     radiance = np.clip(merged, FLOAT32_TINY, FLOAT32_MAX).astype(np.float32)
-    return radiance, (clipped, black, tuple(used))
+    return radiance, (clipped, black)

@@ -54,8 +54,9 @@ class MergeStatistics:
     """Saturated (a channel at ``Z_max``) even in the shortest bracket."""
     black_everywhere: int
     """Code 0 in every channel even in the longest bracket."""
-    used_per_bracket: tuple[int, ...]
-    """Pixels each bracket contributed to (not dropped by saturation, weight above 0)."""
+    observations_skipped: int = 0
+    """Pixel-brackets never read: the early stop found their whole row saturated in that
+    bracket or a shorter one (out of ``pixels`` x brackets)."""
 
 
 SATURATION_POLICIES = ("channel", "pixel")
@@ -97,31 +98,39 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
                          f"brackets have {channels}")
     if count > MAX_BRACKETS:
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
-    # Per channel: codes where g is extrapolated (no weighted sample fell there) say little
-    # about radiance, so they get no weight; the fallbacks still cover every pixel.
-    weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
-    estimates = estimate_tables(response, stack.exposures, domain)
-    # Channel-first tables: the kernel walks one channel's tables at a time.
-    weights_c = np.ascontiguousarray(weights.T)
-    estimates_c = np.ascontiguousarray(estimates.transpose(2, 0, 1))
-    weighted_c = weights_c[:, None, :] * estimates_c
+    weighted, estimates, weights = merge_tables(response, stack.exposures, weighting, domain)
     radiance = np.empty((height, width, channels), dtype=np.float32)
-    used_rows = np.zeros((height, count), dtype=np.int64)
-    clipped_rows = np.zeros(height, dtype=np.int64)
-    black_rows = np.zeros(height, dtype=np.int64)
+    counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
     # The same thread count as every other kernel (HDRIO_THREADS, else the CPUs we have).
     numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
-    merge_kernel(np.ascontiguousarray(stack.codes), weighted_c, estimates_c, weights_c,
-                 stack.code_max, saturation == "channel", domain == "log",
-                 radiance, used_rows, clipped_rows, black_rows)
+    codes = np.ascontiguousarray(stack.codes).reshape(count, height, width * channels)
+    no_far = np.empty((0, 0, width * channels), dtype=codes.dtype)
+    merge_kernel(codes, no_far, 0, height, weighted, estimates, weights, stack.code_max,
+                 saturation == "channel", domain == "log",
+                 radiance.reshape(height, width * channels), *counts)
     if domain == "log":
         exp_in_place(radiance)
     statistics = MergeStatistics(
-        pixels=height * width, clipped_everywhere=int(clipped_rows.sum()),
-        black_everywhere=int(black_rows.sum()),
-        used_per_bracket=tuple(int(u) for u in used_rows.sum(axis=0)),
+        pixels=height * width, clipped_everywhere=int(counts[0].sum()),
+        black_everywhere=int(counts[1].sum()), observations_skipped=int(counts[2].sum()),
     )
     return radiance, statistics
+
+
+def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str,
+                 domain: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's float64 tables: ``w(z) x_j(z)`` and ``x_j(z)`` ``(P, C, levels)``,
+    ``w(z)`` ``(C, levels)``, with ``w(Z_max) = 0``.
+
+    Per channel, codes where ``g`` is extrapolated (no weighted sample fell there) say
+    little about radiance, so they get no weight; the fallbacks still cover every pixel.
+    """
+    weights = weights_table(weighting, response.code_max)[:, None] * response.supported
+    weights[-1] = 0.0  # a saturated observation never counts (the kernel relies on it)
+    weights = np.ascontiguousarray(weights.T)
+    estimates = np.ascontiguousarray(
+        estimate_tables(response, exposures, domain).transpose(0, 2, 1))
+    return weights[None] * estimates, estimates, weights
 
 
 def _merge_log(stack, response, weighting="Debevec1997", saturation="channel"):
