@@ -24,6 +24,8 @@ from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
 from hdrio.response import RESPONSE_METHODS, CameraResponse
+from hdrio.response.stored import read_response
+from hdrio.skips import SKIPS, SkipReport, classify
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
 from hdrio.tonemap.display import preview_OCIO_display
@@ -57,6 +59,15 @@ class MergeOptions:
     ocio_config: str | None = None  # path or ocio:// URI; None: $OCIO, else built-in
     calibration: Calibration | None = None  # None: relative radiance
     white_balance: Region | None = None  # neutral region x, y, w, h; None: camera's
+    # A saved response (an EXR written by hdrio) instead of a solve: hdrio.skips.
+    response_from: str | None = None
+    # Names in hdrio.skips.SKIPS turned off (all on by default).
+    no_skip: tuple[str, ...] = ()
+
+    @property
+    def skips(self) -> frozenset[str]:
+        """The skips (:mod:`hdrio.skips`) in force."""
+        return frozenset(SKIPS) - set(self.no_skip)
 
 
 @dataclass
@@ -69,6 +80,7 @@ class MergeResult:
     timings: dict[str, float] = field(default_factory=dict)
     exposure_scale: float = 1.0
     colour: ColourState | None = None
+    skipped: SkipReport = field(default_factory=SkipReport)
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -93,9 +105,12 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     """Recover the response and merge ``stack`` (no file I/O).
 
     ``response``, when given (e.g. read back with :func:`hdrio.response.stored.read_response`),
-    is used instead of a solve; camera RAW stacks use the linear response.
+    is used instead of a solve; camera RAW stacks use the linear response. The skips in
+    ``options.skips`` apply (:mod:`hdrio.skips`); ``result.skipped`` says which did.
     """
     say = progress or (lambda message: None)
+    skips = options.skips
+    skipped = SkipReport(enabled=skips, dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if response is None:
@@ -106,12 +121,30 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             stack, smoothing=options.smoothing, weighting=options.weighting,
             sampling=options.sampling, samples=options.samples,
             exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
+            **({"solve_identical_once": "channels" in skips} if method != "linear" else {}),
         )
+        skipped.channels_solved = response.parameters.get("channels_solved")
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
-    say(f"merging {stack.count} brackets ({options.merge} domain)")
-    radiance, statistics = MERGE_METHODS[options.merge](stack, response, options.weighting,
-                                                         options.saturation)
+    merged = stack
+    kinds = stack.kinds
+    if "covered" in skips and not all(kinds):  # not looked at when read
+        kinds = tuple(classify(codes, stack.code_max) for codes in stack.codes)
+    if "covered" in skips and "covers" in kinds:
+        j = len(kinds) - 1 - kinds[::-1].index("covers")  # the longest
+        skipped.covering = Path(stack.files[j]).name
+        merged = ExposureStack.from_arrays(
+            stack.codes[j:j + 1], stack.exposures[j:j + 1], files=stack.files[j:j + 1],
+            code_max=stack.code_max, exposure_sources=stack.exposure_sources[j:j + 1],
+            metadata=stack.metadata[j:j + 1], kinds=("covers",),
+            dropped=stack.dropped + tuple((name, f"{skipped.covering} covers the range")
+                                          for name in stack.files if name != stack.files[j]))
+    say(f"merging {merged.count} brackets ({options.merge} domain)")
+    radiance, statistics = MERGE_METHODS[options.merge](
+        merged, response, options.weighting, options.saturation,
+        early_stop="early-stop" in skips)
+    skipped.early_stop_fraction = statistics.observations_skipped / (
+        statistics.pixels * merged.count)
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
     timings["merge"] = time.perf_counter() - start
@@ -119,7 +152,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         stack, response, radiance, input_encoding=options.input_encoding,
         white_balance=options.white_balance, calibration=options.calibration)
     options = replace(options, colourspace=colour.encoding.colour_science)
-    return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour)
+    return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
+                       skipped=skipped)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -159,6 +193,9 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    skipped = result.skipped.lines(stack.shape[2])
+    if skipped:
+        attributes["hdrio:skipped"] = "; ".join(skipped)
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
     if result.colour is not None:
@@ -207,12 +244,19 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     """
     say = progress or (lambda message: None)
     require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
+    response = None
+    if options.response_from is not None and "response" in options.skips:
+        response = read_response(options.response_from)
     start = time.perf_counter()
     say(f"reading {len(paths)} brackets")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
-                          progress=read_progress)
+                          progress=read_progress, skip_brackets="brackets" in options.skips,
+                          stop_when_covered=response is not None
+                          and "covered" in options.skips)
     read_time = time.perf_counter() - start
-    result = merge_stack(stack, options, progress)
+    result = merge_stack(stack, options, progress, response)
+    if response is not None:
+        result.skipped.response_from = str(options.response_from)
     result.timings["read"] = read_time
     start = time.perf_counter()
     radiance = result.radiance

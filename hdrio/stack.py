@@ -31,6 +31,12 @@ class ExposureStack:
     code_max
         Largest code value of the encoding (255 for 8-bit, 65535 for 16-bit): the
         saturation level.
+    dropped
+        ``(file, reason)`` of brackets given but not kept (:mod:`hdrio.skips`).
+    kinds
+        Per bracket, what its code values were found to be when read: ``"dark"``,
+        ``"bright"``, ``"covers"`` (every one well exposed), ``"mixed"``, or ``""`` when
+        not looked at (:func:`hdrio.skips.classify`).
     """
 
     codes: np.ndarray
@@ -39,6 +45,8 @@ class ExposureStack:
     exposure_sources: tuple[str, ...]
     code_max: int
     metadata: tuple[dict, ...] = field(default_factory=tuple)
+    dropped: tuple[tuple[str, str], ...] = ()
+    kinds: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         validate_stack(self)
@@ -52,9 +60,11 @@ class ExposureStack:
         code_max: int | None = None,
         exposure_sources=None,
         metadata=None,
+        dropped=(),
+        kinds=None,
     ) -> ExposureStack:
         """Build a stack from arrays in any order; it is sorted by exposure."""
-        codes = np.asarray(codes)
+        codes = np.asanyarray(codes)  # keeps a staged np.memmap one
         if codes.ndim == 3:
             codes = codes[..., np.newaxis]
         exposures = np.asarray(exposures, dtype=np.float64).reshape(-1)
@@ -64,6 +74,7 @@ class ExposureStack:
             tuple(exposure_sources) if exposure_sources is not None else ("explicit",) * count
         )
         metadata = tuple(metadata) if metadata is not None else tuple({} for _ in range(count))
+        kinds = tuple(kinds) if kinds is not None else ("",) * count
         if code_max is None:
             code_max = int(np.iinfo(codes.dtype).max) if codes.dtype.kind == "u" else 255
         if not (len(files) == len(sources) == len(metadata) == count == exposures.size):
@@ -79,6 +90,8 @@ class ExposureStack:
             exposure_sources=tuple(sources[j] for j in order),
             code_max=int(code_max),
             metadata=tuple(metadata[j] for j in order),
+            dropped=tuple(dropped),
+            kinds=tuple(kinds[j] for j in order),
         )
 
     @property
@@ -102,7 +115,7 @@ def validate_stack(stack: ExposureStack) -> None:
         raise ValueError(f"codes must have shape (P, H, W, C); got {codes.shape}")
     if codes.dtype.kind not in "ui":
         raise InputError(files[0], f"code values must be integers, got {codes.dtype}")
-    if len(files) < 2:
+    if len(files) + len(stack.dropped) < 2:
         name = files[0] if files else "<no input>"
         raise InputError(name, "at least 2 bracketed exposures are needed; got 1")
     for name, value in zip(files, exposures):
@@ -118,5 +131,7 @@ def validate_stack(stack: ExposureStack) -> None:
             f"same exposure ({exposures[j + 1]:g}) as {files[j]} ({exposures[j]:g}): every "
             "bracket needs its own exposure",
         )
+    if codes.dtype.kind == "u" and np.iinfo(codes.dtype).max <= stack.code_max:
+        return  # every value fits: no pass over the codes needed
     if codes.min() < 0 or codes.max() > stack.code_max:
         raise InputError(files[0], f"code values outside 0..{stack.code_max}")

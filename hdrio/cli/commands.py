@@ -14,6 +14,7 @@ from hdrio.merge.debevec1997 import MERGE_METHODS, SATURATION_POLICIES
 from hdrio.merge.weighting import WEIGHTING_METHODS
 from hdrio.pipeline import MergeOptions, MergeResult, merge_files
 from hdrio.response import RESPONSE_METHODS, SAMPLING_METHODS
+from hdrio.skips import SKIPS
 from hdrio.tonemap import TONEMAP_METHODS
 
 _WRITABLE = {".exr"}
@@ -56,6 +57,13 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
                        help="never sample pixels of this code value in any bracket "
                             "(e.g. 0,0,255 for registration borders)")
     group.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    group.add_argument("--response-from", metavar="EXR", default=None,
+                       help="use the camera response saved in an EXR written by hdrio "
+                            "instead of solving (skips the solve)")
+    group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
+                       choices=[*SKIPS, "all"],
+                       help="turn off one of the work skips (repeatable): "
+                            f"{', '.join(SKIPS)}, or all (see docs/speed.md)")
 
 
 def options_from(args: argparse.Namespace) -> MergeOptions:
@@ -65,7 +73,9 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         weighting=WEIGHTING_METHODS.canonical(args.weighting),
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
-        seed=args.seed, saturation=args.saturation, **colour_fields(args),
+        seed=args.seed, saturation=args.saturation, response_from=args.response_from,
+        no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
+        **colour_fields(args),
     )
 
 
@@ -148,12 +158,13 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), "
         f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])} "
         f"(exposures from {stack.exposure_sources[0]}), read in {times['read']:.2f} s",
-        f"response:  {result.response.method}, lambda {params['smoothing']:g}, "
+        f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge} domain, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
         f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"
         + ("" if result.exposure_scale == 1.0 else

@@ -22,6 +22,8 @@ from hdrio.io.exposure import (
     relative_exif_exposures,
 )
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
+from hdrio.io.staging import codes_buffer, release
+from hdrio.skips import classify
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
@@ -169,6 +171,8 @@ def read_brackets(
     exposures_from: str | Path | None = None,
     progress: Callable[[int, int, str], None] | None = None,
     white_balance: Sequence[float] | None = None,
+    skip_brackets: bool = True,
+    stop_when_covered: bool = False,
 ) -> ExposureStack:
     """Read brackets into an :class:`ExposureStack` sorted by increasing exposure.
 
@@ -187,6 +191,16 @@ def read_brackets(
     white_balance
         Camera RAW only: multipliers ``(R, G, B)`` for the whole set instead of the first
         file's as-shot ones.
+    skip_brackets
+        Drop brackets with no well-exposed code value, and those beyond them, without
+        decoding the latter (:mod:`hdrio.skips`); they are listed in ``stack.dropped``.
+    stop_when_covered
+        Stop decoding once a bracket has every code value well exposed, and keep only it
+        (for a merge with a saved response: :mod:`hdrio.skips`, ``covered``).
+
+    Brackets are decoded from the middle of the exposure ladder outwards, each straight
+    into its slot of one array, staged in a temporary file beyond the memory budget
+    (:mod:`hdrio.io.staging`).
 
     Without either, EXIF is used when every file has an exposure time, else the
     file-name convention when every name has one. Raises :class:`InputError` naming the
@@ -216,22 +230,68 @@ def read_brackets(
     values, source = _resolve_exposures(paths, [h.exif for h in headers], exposures,
                                         exposures_from)
     order = np.argsort(np.asarray(values, dtype=np.float64), kind="stable")
-    codes = np.empty((len(paths), *first.shape), dtype=first.dtype)
-    for done, j in enumerate(order, start=1):
-        with _open(paths[j]) as (image, header):
-            if header.shape != first.shape or header.code_max != first.code_max:
-                raise InputError(paths[j], "changed while being read")
-            _decode_into(image, header, codes[done - 1])
+    count = len(paths)
+    codes = codes_buffer((count, *first.shape), first.dtype)
+    kinds = [""] * count
+    kept = [0, count]  # positions (in exposure order) still kept: kept[0] .. kept[1] - 1
+    reasons: dict[int, str] = {}
+    covering = None
+    for done, position in enumerate(_middle_out(count), start=1):
+        j = order[position]
+        if kept[0] <= position < kept[1]:
+            with _open(paths[j]) as (image, header):
+                if header.shape != first.shape or header.code_max != first.code_max:
+                    raise InputError(paths[j], "changed while being read")
+                _decode_into(image, header, codes[position])
+            kinds[position] = classify(codes[position], first.code_max)
+            release(codes, position)
+            if skip_brackets:
+                _drop_beyond(position, kinds[position], kept, reasons)
+            if stop_when_covered and kinds[position] == "covers":
+                covering = position
         if progress:
-            progress(done, len(paths), str(paths[j]))
+            progress(done, count, str(paths[j]))
+        if covering is not None:
+            break
+    if covering is not None:
+        kept = [covering, covering + 1]
+    names = [str(paths[j]) for j in order]
+    dropped = tuple((names[p], reasons.get(p) or
+                     f"not needed: {Path(names[covering]).name} covers the range")
+                    for p in range(count) if not kept[0] <= p < kept[1])
+    chosen = slice(kept[0], kept[1])
     return ExposureStack.from_arrays(
-        codes,
-        [values[j] for j in order],
-        files=[str(paths[j]) for j in order],
+        codes[chosen],  # a view: nothing is copied
+        [values[j] for j in order[chosen]],
+        files=names[chosen],
         code_max=first.code_max,
-        exposure_sources=[source] * len(paths),
-        metadata=[headers[j].exif for j in order],
+        exposure_sources=[source] * (kept[1] - kept[0]),
+        metadata=[headers[j].exif for j in order[chosen]],
+        dropped=dropped,
+        kinds=kinds[chosen],
     )
+
+
+def _middle_out(count: int) -> list[int]:
+    """Exposure positions in decoding order: the middle, then shorter ones down to the
+    shortest, then longer ones up to the longest."""
+    middle = count // 2
+    return [*range(middle, -1, -1), *range(middle + 1, count)]
+
+
+def _drop_beyond(position: int, kind: str, kept: list[int], reasons: dict[int, str]) -> None:
+    """Drop an all-dark bracket and every shorter one, or an all-bright bracket and every
+    longer one, as long as two brackets remain."""
+    if kind == "dark" and kept[1] - (position + 1) >= 2:
+        for p in range(kept[0], position + 1):
+            reasons[p] = ("no well-exposed pixel (all dark)" if p == position
+                          else "shorter than an all-dark bracket: not decoded")
+        kept[0] = position + 1
+    elif kind == "bright" and position - kept[0] >= 2:
+        for p in range(position, kept[1]):
+            reasons[p] = ("no well-exposed pixel (all bright)" if p == position
+                          else "longer than an all-bright bracket: not decoded")
+        kept[1] = position
 
 
 def _raw_stack(paths: list[Path], exposures, exposures_from, progress,

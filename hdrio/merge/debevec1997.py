@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from hdrio.io.staging import is_staged, release
 from hdrio.merge.kernel import MAX_BRACKETS, exp_in_place, merge_kernel
 from hdrio.merge.weighting import weights_table
 from hdrio.parallel import threads
@@ -61,6 +62,10 @@ class MergeStatistics:
 
 SATURATION_POLICIES = ("channel", "pixel")
 
+MERGE_BAND_ROWS = 128
+"""Rows merged per kernel call when the codes are staged in a file (each band's pages are
+released after it: 128 rows of seven 24 MP brackets hold 16 MB)."""
+
 
 def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str) -> np.ndarray:
     """Per-bracket estimates ``(P, code_max + 1, C)``: ``g(z) - ln dt`` or ``f^-1(z) / dt``."""
@@ -73,11 +78,16 @@ def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str
 
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
-                   saturation: str = "channel") -> tuple[np.ndarray, MergeStatistics]:
+                   saturation: str = "channel", early_stop: bool = True
+                   ) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
 
     ``saturation`` is ``"channel"`` (default: a saturated channel is dropped on its own)
     or ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel).
+    ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (same result).
+
+    Codes staged in a file (:mod:`hdrio.io.staging`) are merged a band of rows at a time,
+    each band's pages given back once merged.
 
     Units: relative scene-linear radiance ``E`` with ``E * dt = f^-1(Z)``: exposures in
     seconds and ``g(z_mid) = 0`` make 1.0 the radiance that a 1-second exposure records at
@@ -103,11 +113,14 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
     # The same thread count as every other kernel (HDRIO_THREADS, else the CPUs we have).
     numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
-    codes = np.ascontiguousarray(stack.codes).reshape(count, height, width * channels)
-    no_far = np.empty((0, 0, width * channels), dtype=codes.dtype)
-    merge_kernel(codes, no_far, 0, height, weighted, estimates, weights, stack.code_max,
-                 saturation == "channel", domain == "log",
-                 radiance.reshape(height, width * channels), *counts)
+    codes = stack.codes.reshape(count, height, width * channels)  # a view (contiguous)
+    band = MERGE_BAND_ROWS if is_staged(stack.codes) else height
+    for top in range(0, height, band):
+        bottom = min(height, top + band)
+        merge_kernel(codes, top, bottom, weighted, estimates, weights, stack.code_max,
+                     saturation == "channel", domain == "log", early_stop,
+                     radiance.reshape(height, width * channels), *counts)
+        release(stack.codes, None, top, bottom)
     if domain == "log":
         exp_in_place(radiance)
     statistics = MergeStatistics(
@@ -133,12 +146,14 @@ def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str
     return weights[None] * estimates, estimates, weights
 
 
-def _merge_log(stack, response, weighting="Debevec1997", saturation="channel"):
-    return merge_brackets(stack, response, weighting, domain="log", saturation=saturation)
+def _merge_log(stack, response, weighting="Debevec1997", saturation="channel",
+               early_stop=True):
+    return merge_brackets(stack, response, weighting, "log", saturation, early_stop)
 
 
-def _merge_linear(stack, response, weighting="Debevec1997", saturation="channel"):
-    return merge_brackets(stack, response, weighting, domain="linear", saturation=saturation)
+def _merge_linear(stack, response, weighting="Debevec1997", saturation="channel",
+                  early_stop=True):
+    return merge_brackets(stack, response, weighting, "linear", saturation, early_stop)
 
 
 MERGE_METHODS: MethodRegistry = MethodRegistry(

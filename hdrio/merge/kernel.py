@@ -29,9 +29,8 @@ than they save (1.45x slower in all).
 The log-domain result is left as ``ln E`` (float32, clamped to float32's range) for
 :func:`exp_in_place`, NumPy's SIMD ``exp`` run on every core.
 
-The codes may come in two parts, so that brackets kept in memory and brackets staged to
-disk (read back a band of rows at a time) are merged in one pass: ``near`` holds the
-first brackets whole, ``far`` the rest for rows ``top .. top + far.shape[1]``.
+The kernel merges a band of rows per call, so that brackets staged in a temporary file
+(:mod:`hdrio.io.staging`) are read, and released, a band at a time.
 
 Compiled by numba on first use and cached on disk beside this module (or in
 ``NUMBA_CACHE_DIR``); the first call in a new environment pays the compile, which
@@ -59,13 +58,6 @@ LOG_FLOAT32_MAX = math.log(FLOAT32_MAX) - 1e-3
 ROWS_PER_TASK = 16
 """Rows per parallel task: small enough for the threads to share any band evenly."""
 
-
-
-@njit(cache=True, nogil=True)
-def _bracket_row(near, far, j, y, top):  # pragma: no cover - compiled
-    if j < near.shape[0]:
-        return near[j, y]
-    return far[j - near.shape[0], y - top]
 
 
 @njit(cache=True, nogil=True)
@@ -124,13 +116,13 @@ def _accumulate(row, weighted, weights, code_max, per_channel, channels, numerat
 
 
 @njit(cache=True, nogil=True)
-def _fallback(near, far, y, top, x, c, channels, count, code_max, per_channel,
+def _fallback(codes, y, x, c, channels, count, code_max, per_channel,
               estimates):  # pragma: no cover - compiled
     """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
     from (the shortest bracket's if it is saturated even there)."""
     kept = 0
     while kept < count:
-        row = _bracket_row(near, far, kept, y, top)
+        row = codes[kept, y]
         saturated = row[x * channels + c] == code_max
         if not per_channel:
             for k in range(channels):
@@ -139,7 +131,7 @@ def _fallback(near, far, y, top, x, c, channels, count, code_max, per_channel,
             break
         kept += 1
     j = kept - 1 if kept > 0 else 0
-    return estimates[j, c, _bracket_row(near, far, j, y, top)[x * channels + c]]
+    return estimates[j, c, codes[j, y][x * channels + c]]
 
 
 @njit(cache=True, nogil=True)
@@ -165,22 +157,22 @@ def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cov
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def merge_kernel(near, far, top, bottom, weighted, estimates, weights, code_max,
-                 per_channel, log_domain, out, clipped_rows, black_rows,
+def merge_kernel(codes, top, bottom, weighted, estimates, weights, code_max,
+                 per_channel, log_domain, early_stop, out, clipped_rows, black_rows,
                  skipped_rows):  # pragma: no cover - compiled
     """Merge rows ``top .. bottom`` of the brackets into ``out`` ``(H, W * C)`` float32.
 
-    ``near`` ``(R, H, W * C)`` holds the first ``R`` brackets (shortest exposure first),
-    ``far`` ``(S, bottom - top, W * C)`` the other ``S`` for these rows (``S`` may be 0).
+    ``codes`` is ``(P, H, W * C)``, shortest exposure first.
     Tables, float64: ``weights[c, z]``, ``estimates[j, c, z]`` and
     ``weighted[j, c, z] = weights[c, z] * estimates[j, c, z]``, both weight tables 0 at
     ``z = code_max`` (a saturated observation never counts). Writes ``ln E`` in the
-    log domain (see :func:`exp_in_place`), ``E`` in the linear domain. Per row, for the
+    log domain (see :func:`exp_in_place`), ``E`` in the linear domain. ``early_stop``
+    false reads every bracket of every row (the same result). Per row, for the
     statistics: ``clipped_rows`` (pixels with a channel saturated in the shortest
     bracket), ``black_rows`` (pixels at code 0 in every channel of the longest) and
     ``skipped_rows`` (pixel-brackets the early stop never read).
     """
-    count = near.shape[0] + far.shape[0]
+    count = codes.shape[0]
     channels = weights.shape[0]
     n = out.shape[1]
     low = LOG_FLOAT32_TINY if log_domain else FLOAT32_TINY
@@ -194,14 +186,14 @@ def merge_kernel(near, far, top, bottom, weighted, estimates, weights, code_max,
             # Early stop: the first bracket saturated across the whole row, and every
             # longer one, would be reset away; start below it.
             stop = count
-            for j in range(1, count):
-                if _saturated_everywhere(_bracket_row(near, far, j, y, top), code_max):
+            for j in range(1, count if early_stop else 1):
+                if _saturated_everywhere(codes[j, y], code_max):
                     stop = j
                     break
             numerator[:] = 0.0
             denominator[:] = 0.0
             for j in range(stop - 1, -1, -1):
-                _accumulate(_bracket_row(near, far, j, y, top), weighted[j], weights,
+                _accumulate(codes[j, y], weighted[j], weights,
                             code_max, per_channel, channels, numerator, denominator)
             row = out[y]
             empty = False
@@ -213,14 +205,14 @@ def merge_kernel(near, far, top, bottom, weighted, estimates, weights, code_max,
             if empty:
                 for i in range(n):
                     if denominator[i] <= 0.0:
-                        value = _fallback(near, far, y, top, i // channels, i % channels,
+                        value = _fallback(codes, y, i // channels, i % channels,
                                           channels, count, code_max, per_channel,
                                           estimates)
                         row[i] = min(max(value, low), high)
             skipped_rows[y] = (count - stop) * (n // channels)
             clipped_rows[y], black_rows[y] = _clipped_and_black(
-                _bracket_row(near, far, 0, y, top),
-                _bracket_row(near, far, count - 1, y, top), code_max, channels)
+                codes[0, y],
+                codes[count - 1, y], code_max, channels)
 
 
 EXP_BLOCK = 1 << 20

@@ -210,7 +210,8 @@ def g_solve_Debevec1997(Z, log_exposures, smoothing: float = DEFAULT_SMOOTHING,
 def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
                          weighting: str = "Debevec1997", sampling: str = "stratified",
                          samples: int | None = None, exclude: np.ndarray | None = None,
-                         seed: int = 0, levels: int | None = None, monotone: bool = True):
+                         seed: int = 0, levels: int | None = None, monotone: bool = True,
+                         solve_identical_once: bool = True):
     """Recover a :class:`~hdrio.response.curve.CameraResponse` from an exposure stack.
 
     Parameters
@@ -243,7 +244,9 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
-    Channels whose samples are identical (greyscale stored as RGB) are solved once.
+    Channels whose samples are identical (greyscale stored as RGB) are solved once
+    (unless ``solve_identical_once`` is false: the same curves, solved again);
+    ``parameters["channels_solved"]`` says how many solves ran.
     """
     from hdrio.merge.weighting import weights_table
     from hdrio.response.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
@@ -273,7 +276,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
     level_smoothing = smoothing * (levels / 256) ** 1.5 * sample_balance
     tables, supported, solved = [], [], {}
     for c in range(Z.shape[2]):
-        key = Z[:, :, c].tobytes()
+        key = Z[:, :, c].tobytes() if solve_identical_once else c
         if key not in solved:
             touched = np.bincount(Z[:, :, c].reshape(-1),
                                   weights=weights[Z[:, :, c]].reshape(-1), minlength=levels) > 0
@@ -303,7 +306,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
         parameters={"smoothing": float(smoothing), "level_smoothing": float(level_smoothing),
                     "weighting": weighting,
                     "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
-                    "monotone": bool(monotone), "sample_indices": indices},
+                    "monotone": bool(monotone), "sample_indices": indices,
+                    "channels_solved": len(solved)},
     )
 
 

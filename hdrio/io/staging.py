@@ -1,0 +1,79 @@
+"""Where decoded brackets live: in memory, or staged in a temporary file beyond a budget.
+
+A stack's code values grow with the bracket count (72 MB per 24 MP 8-bit bracket). Up to
+the budget they are an ordinary array. Beyond it they are decoded into a memory-mapped
+temporary file (unlinked at once, so nothing is left behind whatever happens), and each
+bracket's pages are handed back to the kernel as soon as it is decoded, and each band of
+rows as soon as it is merged (``madvise(MADV_DONTNEED)``: the data stay in the file and
+the page cache, but no longer count against the process). The process's peak memory then
+no longer depends on the number of brackets: ``benchmarks/speed`` measures 5, 7 and 9.
+
+Budget: ``HDRIO_MEMORY_BUDGET_MB`` (default 256 MB, three 24 MP brackets); the file goes
+to ``HDRIO_TMPDIR``, else the system's temporary folder.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import tempfile
+
+import numpy as np
+
+DEFAULT_BUDGET_MB = 256
+
+
+def budget_bytes() -> int:
+    """Bytes of code values kept in ordinary memory before staging to a file."""
+    configured = os.environ.get("HDRIO_MEMORY_BUDGET_MB", "").strip()
+    megabytes = float(configured) if configured else DEFAULT_BUDGET_MB
+    return int(megabytes * 2**20)
+
+
+def codes_buffer(shape: tuple[int, ...], dtype, budget: int | None = None) -> np.ndarray:
+    """An uninitialised ``shape`` array: in memory within ``budget`` bytes, else staged."""
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape)) * dtype.itemsize
+    if size <= (budget_bytes() if budget is None else budget):
+        return np.empty(shape, dtype=dtype)
+    folder = os.environ.get("HDRIO_TMPDIR") or None
+    with tempfile.TemporaryFile(prefix="hdrio-codes-", dir=folder) as backing:
+        backing.truncate(size)
+        # The mapping keeps the (already unlinked) file alive after it is closed here.
+        return np.memmap(backing, dtype=dtype, mode="r+", shape=shape)
+
+
+def is_staged(codes: np.ndarray) -> bool:
+    return isinstance(codes, np.memmap) and getattr(codes, "_mmap", None) is not None
+
+
+def release(codes: np.ndarray, bracket: int | None = None, top: int = 0,
+            bottom: int | None = None) -> None:
+    """Give back the pages of rows ``top .. bottom`` of ``bracket`` (every bracket when
+    ``None``) of a staged ``(P, H, ...)`` array; nothing for an in-memory one.
+
+    Only whole pages inside the range are released (a page shared with the next rows
+    stays), so a band's neighbours are never touched.
+    """
+    if not is_staged(codes):
+        return
+    row_bytes = int(np.prod(codes.shape[2:])) * codes.itemsize
+    height = codes.shape[1]
+    bottom = height if bottom is None else bottom
+    start_of = codes.ctypes.data - _mapping_address(codes)
+    brackets = range(codes.shape[0]) if bracket is None else (bracket,)
+    for j in brackets:
+        first = start_of + (j * height + top) * row_bytes
+        last = start_of + (j * height + bottom) * row_bytes
+        first = -(-first // mmap.PAGESIZE) * mmap.PAGESIZE
+        last = last // mmap.PAGESIZE * mmap.PAGESIZE
+        if last > first:
+            codes._mmap.madvise(mmap.MADV_DONTNEED, first, last - first)
+
+
+def _mapping_address(codes: np.memmap) -> int:
+    """Address of the first byte of the mapping ``codes`` is a view of."""
+    base = codes
+    while isinstance(base.base, np.ndarray):
+        base = base.base
+    return base.ctypes.data - int(getattr(base, "offset", 0))

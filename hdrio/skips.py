@@ -1,0 +1,118 @@
+"""Skipping the work a scene does not need, and saying what was skipped.
+
+Five skips, each on by default, each reported in ``hdrio merge``'s summary, each with a
+row in ``benchmarks/speed`` (section ``skips``) and a test that it leaves the result
+unchanged, or within a stated tolerance:
+
+``brackets``
+    A bracket with no well-exposed code value (every code below 5 % of the range: too
+    dark; or above 95 %: blown out) adds nothing a neighbour does not, and neither does
+    anything beyond it: a shorter exposure than an all-dark bracket is darker still, a
+    longer one than an all-bright bracket brighter still. Brackets are decoded from the
+    middle of the ladder outwards, so those beyond are dropped *without being decoded*.
+``response``
+    A saved response (``--response-from``: an EXR written by hdrio) replaces the solve.
+``covered``
+    When one bracket alone has every code value between 25 % and 95 % of the range, it
+    already covers the scene: the merge reduces to that bracket's estimate (with a saved
+    response, the other brackets are not even decoded). The result differs from the full
+    merge by the noise and quantisation the other brackets would have averaged out
+    (``tests/test_skips.py`` states the bounds).
+``channels``
+    Channels whose samples are identical (greyscale stored as RGB) are solved once.
+``early-stop``
+    The merge kernel never reads the rows of a bracket, or of any longer one, once a
+    shorter bracket's row is saturated everywhere (``hdrio.merge.kernel``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit, prange
+
+SKIPS = ("brackets", "response", "covered", "channels", "early-stop")
+
+WELL_EXPOSED = (0.05, 0.95)
+"""Code values strictly inside these fractions of the range are well exposed."""
+
+COVERING = (0.25, 0.95)
+"""A bracket covers the scene when all its code values are strictly inside these
+fractions: above a quarter of the range a code step is under 3.5 % of radiance for a
+gamma-2.2 camera, so one bracket alone is nearly as good as the merge (docs/speed.md)."""
+
+
+def well_exposed_codes(code_max: int, fractions: tuple[float, float] = WELL_EXPOSED
+                       ) -> tuple[int, int]:
+    """``(low, high)``: the code values strictly inside ``fractions`` of the range are
+    ``low .. high`` inclusive."""
+    low, high = fractions
+    return int(np.floor(low * code_max)) + 1, int(np.ceil(high * code_max)) - 1
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def code_range(codes):  # pragma: no cover - compiled
+    """Smallest and largest value of ``codes`` (any shape), one pass on every core."""
+    flat = codes.reshape(-1)
+    tasks = 64
+    lows = np.empty(tasks, np.int64)
+    highs = np.empty(tasks, np.int64)
+    for task in prange(tasks):
+        low = np.int64(1 << 62)
+        high = np.int64(-1)
+        for i in range(flat.size * task // tasks, flat.size * (task + 1) // tasks):
+            value = np.int64(flat[i])
+            low = min(low, value)
+            high = max(high, value)
+        lows[task] = low
+        highs[task] = high
+    return lows.min(), highs.max()
+
+
+def classify(codes: np.ndarray, code_max: int) -> str:
+    """``"dark"`` or ``"bright"`` (no code well exposed), ``"covers"`` (every code inside
+    :data:`COVERING`) or ``"mixed"``."""
+    low, high = code_range(codes)
+    well_low, well_high = well_exposed_codes(code_max)
+    if high < well_low:
+        return "dark"
+    if low > well_high:
+        return "bright"
+    cover_low, cover_high = well_exposed_codes(code_max, COVERING)
+    if low >= cover_low and high <= cover_high:
+        return "covers"
+    return "mixed"
+
+
+@dataclass
+class SkipReport:
+    """What was skipped, for the summary (seconds saved are not known, only the work)."""
+
+    enabled: frozenset[str] = frozenset(SKIPS)
+    dropped: list[tuple[str, str]] = field(default_factory=list)
+    """``(file, reason)`` of every bracket dropped, decoded or not."""
+    covering: str | None = None
+    """The bracket that alone covered the scene's range (the merge used only it)."""
+    response_from: str | None = None
+    """Where a saved response came from (the solve was skipped)."""
+    channels_solved: int | None = None
+    """Distinct channels solved (fewer than the channels when some were identical)."""
+    early_stop_fraction: float = 0.0
+    """Fraction of pixel-brackets the merge kernel never read."""
+
+    def lines(self, channels: int) -> list[str]:
+        said = []
+        if self.dropped:
+            said.append("dropped " + ", ".join(f"{name} ({why})" for name, why in self.dropped))
+        if self.response_from:
+            said.append(f"solve (response from {self.response_from})")
+        if self.covering:
+            said.append(f"merge of the other brackets ({self.covering} covers the range)")
+        if self.channels_solved is not None and self.channels_solved < channels:
+            said.append(f"{channels - self.channels_solved} of {channels} channel solves "
+                        "(identical channels)")
+        if self.early_stop_fraction > 0:
+            said.append(f"{100 * self.early_stop_fraction:.1f} % of the merge "
+                        "(rows saturated in a shorter bracket)")
+        return said

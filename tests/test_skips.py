@@ -1,0 +1,180 @@
+"""Each skip of hdrio.skips leaves the result unchanged, or within a stated tolerance,
+and is reported; the scenes are the speed benchmark's, built to need each skip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.speed.scene import (
+    covered_scene,
+    grey_scene,
+    ladder_beyond_scene,
+    narrow_scene,
+    sky_scene,
+    true_response,
+)
+from hdrio.io import brackets as brackets_module
+from hdrio.io.brackets import read_brackets
+from hdrio.io.write import write_image
+from hdrio.pipeline import MergeOptions, merge_files, merge_stack
+from hdrio.response import response_Debevec1997
+from hdrio.skips import COVERING, SKIPS, classify, well_exposed_codes
+from hdrio.synthetic import radiance_error
+from tests.conftest import run_cli
+
+SIZE = (120, 180)
+
+
+def _write(stack, folder):
+    folder.mkdir(exist_ok=True)
+    paths = [write_image(folder / f"b{j}.png", codes, "uint8")
+             for j, codes in enumerate(stack.codes)]
+    return paths, [repr(float(t)) for t in stack.exposures]
+
+
+def _only_off(name: str) -> MergeOptions:
+    return MergeOptions(no_skip=(name,))
+
+
+def test_well_exposed_codes_are_strictly_inside_5_and_95_percent():
+    assert well_exposed_codes(255) == (13, 242)
+    assert well_exposed_codes(255, COVERING) == (64, 242)
+    codes = np.full((4, 4, 3), 64, np.uint8)
+    codes[1, 1, 1] = 242
+    assert classify(codes, 255) == "covers"
+    codes[0, 0, 0] = 63
+    assert classify(codes, 255) == "mixed"
+    assert classify(np.full((2, 2, 3), 12, np.uint8), 255) == "dark"
+    assert classify(np.full((2, 2, 3), 243, np.uint8), 255) == "bright"
+
+
+def test_brackets_beyond_the_scene_are_dropped_and_not_decoded(tmp_path, monkeypatch):
+    stack = ladder_beyond_scene(*SIZE)
+    paths, exposures = _write(stack, tmp_path / "in")
+    decoded = []
+    original = brackets_module._decode_into
+
+    def counting(image, header, out):
+        decoded.append(header.path.name)
+        original(image, header, out)
+
+    monkeypatch.setattr(brackets_module, "_decode_into", counting)
+    # Make the two longest brackets all bright: the longest is then never decoded.
+    write_image(paths[7], np.full_like(stack.codes[7], 250), "uint8")
+    kept = read_brackets(paths, exposures=exposures)
+    assert [name for name, _ in kept.dropped] == [str(paths[0]), str(paths[7]), str(paths[8])]
+    assert "b8.png" not in decoded and len(decoded) == 8
+    assert "not decoded" in dict(kept.dropped)[str(paths[8])]
+    everything = read_brackets(paths, exposures=exposures, skip_brackets=False)
+    assert everything.count == 9 and not everything.dropped
+
+
+def test_dropping_brackets_moves_the_merge_little_and_towards_the_scene(tmp_path):
+    # The dropped brackets' codes all lie within 5 % of an end of the range, where the
+    # estimates are noisiest (code 5 is quantised to 40 %) and the triangle weights
+    # small. Measured with the same response both ways: median 0.28 %, p99 6.0 % apart,
+    # and the skip is the closer to the scene (median 1.38 % against 1.69 %, p99 5.4 %
+    # against 7.4 %). Bounds: 1 % and 10 % apart, and no further from the scene.
+    stack = ladder_beyond_scene(*SIZE)
+    paths, exposures = _write(stack, tmp_path / "in")
+    response = true_response()
+    on = read_brackets(paths, exposures=exposures)
+    off = read_brackets(paths, exposures=exposures, skip_brackets=False)
+    assert on.count == 7 and off.count == 9
+    merged_on = merge_stack(on, _only_off("covered"), response=response).radiance
+    merged_off = merge_stack(off, _only_off("covered"), response=response).radiance
+    difference = np.abs(merged_on / merged_off - 1)
+    assert np.median(difference) < 0.01 and np.percentile(difference, 99) < 0.10
+    truth = narrow_scene(*SIZE, stops=3.0)
+    assert radiance_error(merged_on, truth)["median"] <= radiance_error(merged_off,
+                                                                        truth)["median"]
+
+
+def test_saved_response_skips_the_solve_and_gives_the_same_exr(tmp_path, capsys):
+    stack = sky_scene(*SIZE)
+    paths, exposures = _write(stack, tmp_path / "in")
+    first = tmp_path / "first.exr"
+    code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
+                           "-o", first, "-q", "-d", "float")
+    assert code == 0
+    code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
+                           "-o", tmp_path / "second.exr", "-q", "-d", "float",
+                           "--response-from", first)
+    assert code == 0 and f"solve (response from {first})" in out
+    from hdrio.imageops import read_image
+
+    # The header keeps g as float32 at every level: 6e-8 relative in g, so 1e-6 in E.
+    second, header = read_image(tmp_path / "second.exr")
+    np.testing.assert_allclose(second, read_image(first)[0], rtol=1e-6)
+    assert header["hdrio:skipped"].startswith("solve (response from")
+
+
+def test_covering_bracket_short_circuits_the_merge_within_stated_bounds():
+    # One bracket alone keeps the quantisation and noise the other four would average
+    # out. Measured: median 0.79 %, p99 3.3 % apart; against the scene 0.86 % / 3.8 %
+    # with the skip and 0.53 % / 2.1 % without. Bounds: 1.5 % and 5 % apart, and the
+    # skip's median error against the scene under 1.5 %.
+    stack = covered_scene(*SIZE)
+    response = true_response()
+    on = merge_stack(stack, MergeOptions(), response=response)
+    off = merge_stack(stack, _only_off("covered"), response=response)
+    assert on.skipped.covering == "bracket2" and off.skipped.covering is None
+    difference = np.abs(on.radiance / off.radiance - 1)
+    assert np.median(difference) < 0.015 and np.percentile(difference, 99) < 0.05
+    truth = narrow_scene(*SIZE, stops=3.5)
+    assert radiance_error(on.radiance, truth)["median"] < 0.015
+
+
+def test_covered_with_saved_response_decodes_one_bracket(tmp_path, monkeypatch):
+    stack = covered_scene(*SIZE)
+    paths, exposures = _write(stack, tmp_path / "in")
+    first = tmp_path / "first.exr"
+    merge_files(paths, first, exposures=exposures)
+    decoded = []
+    original = brackets_module._decode_into
+    monkeypatch.setattr(brackets_module, "_decode_into",
+                        lambda image, header, out: (decoded.append(header.path.name),
+                                                    original(image, header, out)))
+    result = merge_files(paths, tmp_path / "second.exr", exposures=exposures,
+                         options=MergeOptions(response_from=str(first)))
+    assert decoded == ["b2.png"] and result.stack.count == 1
+    assert len(result.stack.dropped) == 4
+    assert result.skipped.covering == "b2.png"
+
+
+def test_identical_channels_are_solved_once_with_the_same_curves():
+    stack = grey_scene(*SIZE)
+    once = response_Debevec1997(stack)
+    every = response_Debevec1997(stack, solve_identical_once=False)
+    assert once.parameters["channels_solved"] == 1 and every.parameters["channels_solved"] == 3
+    np.testing.assert_array_equal(once.log_inverse, every.log_inverse)
+
+
+@pytest.mark.parametrize("saturation", ["channel", "pixel"])
+def test_early_stop_gives_the_same_radiance(saturation):
+    stack = sky_scene(*SIZE)
+    options = MergeOptions(saturation=saturation)
+    on = merge_stack(stack, options, response=true_response())
+    off = merge_stack(stack, MergeOptions(saturation=saturation, no_skip=("early-stop",)),
+                      response=true_response())
+    assert on.skipped.early_stop_fraction > 0.2 and off.skipped.early_stop_fraction == 0
+    np.testing.assert_array_equal(on.radiance, off.radiance)
+
+
+def test_summary_reports_the_skips_and_no_skip_all_turns_them_off(tmp_path, capsys):
+    stack = ladder_beyond_scene(*SIZE)
+    paths, exposures = _write(stack, tmp_path / "in")
+    code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
+                           "-o", tmp_path / "a.exr", "-q")
+    assert code == 0
+    skipped = [line for line in out.splitlines() if line.startswith("skipped:")]
+    assert any("dropped" in line and "all dark" in line for line in skipped)
+    paths, exposures = _write(covered_scene(*SIZE), tmp_path / "covered")
+    code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
+                           "-o", tmp_path / "c.exr", "-q")
+    assert code == 0 and "(b2.png covers the range)" in out
+    code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
+                           "-o", tmp_path / "b.exr", "-q", "--no-skip", "all")
+    assert code == 0 and "skipped:" not in out
+    assert set(SKIPS) == {"brackets", "response", "covered", "channels", "early-stop"}
