@@ -30,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 SKIPS = ("brackets", "response", "covered", "channels", "early-stop")
 
@@ -51,23 +51,19 @@ def well_exposed_codes(code_max: int, fractions: tuple[float, float] = WELL_EXPO
     return int(np.floor(low * code_max)) + 1, int(np.ceil(high * code_max)) - 1
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def code_range(codes):  # pragma: no cover - compiled
-    """Smallest and largest value of ``codes`` (any shape), one pass on every core."""
+    """Smallest and largest value of ``codes`` (any shape), in one pass.
+
+    Single-threaded on purpose: brackets are read two at a time on their own threads,
+    and numba's default threading layer must not be entered from two threads at once."""
     flat = codes.reshape(-1)
-    tasks = 64
-    lows = np.empty(tasks, np.int64)
-    highs = np.empty(tasks, np.int64)
-    for task in prange(tasks):
-        low = np.int64(1 << 62)
-        high = np.int64(-1)
-        for i in range(flat.size * task // tasks, flat.size * (task + 1) // tasks):
-            value = np.int64(flat[i])
-            low = min(low, value)
-            high = max(high, value)
-        lows[task] = low
-        highs[task] = high
-    return lows.min(), highs.max()
+    low = flat[0]
+    high = flat[0]
+    for i in range(flat.size):
+        low = min(low, flat[i])
+        high = max(high, flat[i])
+    return int(low), int(high)
 
 
 def classify(codes: np.ndarray, code_max: int) -> str:

@@ -12,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks.speed import endtoend, jit, merge, response
+from benchmarks.speed import endtoend, jit, merge, response, skips
 from benchmarks.speed.scene import bracket_stack
 from benchmarks.truth.harness import environment
 from benchmarks.truth.scenes import REPO_ROOT
 
-SECTIONS = ("jit", "merge", "response", "endtoend")
+SECTIONS = ("jit", "merge", "response", "endtoend", "skips")
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
@@ -53,6 +53,7 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
         "end to end: hdrio / I/O floor": _ratio(rows, next(
             (row["method"] for row in rows if row.get("end_to_end") == "hdrio"), ""),
             "I/O floor (decode JPEGs + write EXR)"),
+        **skips.saved_ratios(rows),
     }
 
 
@@ -90,6 +91,9 @@ def main(argv: list[str] | None = None) -> int:
             rows += response.run(stack, args.repeats)
         if "endtoend" in sections:
             rows += endtoend.run(stack, args.repeats)
+        stack = radiance = None
+    if "skips" in sections:
+        rows += skips.run(args.height, args.width, args.repeats)
     results = {"command": "python -m benchmarks.speed " + " ".join(argv or sys.argv[1:]),
                "size": [args.width, args.height], "brackets": args.brackets,
                "repeats": args.repeats, "load_average": [load_before, os.getloadavg()[0]],

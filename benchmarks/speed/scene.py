@@ -45,49 +45,59 @@ def true_response(code_max: int = 255, channels: int = 3) -> CameraResponse:
     return CameraResponse(table, code_max, np.ones(table.shape, bool), method="truth")
 
 
-# Scenes built to need each skip of hdrio.skips (tests/test_skips.py uses them too).
+# Scenes built to need each skip of hdrio.skips (tests/test_skips.py uses them too). Each
+# is rendered at TILE size (or smaller) and tiled, as bracket_stack is.
 
 def narrow_scene(height: int, width: int, stops: float = 4.0, seed: int = 0) -> np.ndarray:
     """The demo room's texture squeezed into ``stops`` of range (0.5 .. 0.5 * 2^stops):
-    a flat, evenly lit scene that one exposure can hold."""
+    a flat, evenly lit scene that one exposure can hold. At most :data:`TILE` in size."""
     room = demo_scene(min(height, TILE[0]), min(width, TILE[1]), seed=seed)
     log_room = np.log2(room)
     low, high = np.percentile(log_room, [0.1, 99.9])
-    squeezed = 0.5 * 2.0 ** (stops * np.clip((log_room - low) / (high - low), 0, 1))
-    reps = (-(-height // squeezed.shape[0]), -(-width // squeezed.shape[1]), 1)
-    return np.tile(squeezed, reps)[:height, :width].astype(np.float32)
+    return (0.5 * 2.0 ** (stops * np.clip((log_room - low) / (high - low), 0, 1))
+            ).astype(np.float32)
 
 
-def render(radiance: np.ndarray, times: np.ndarray, seed: int = 0) -> ExposureStack:
-    """8-bit brackets of ``radiance`` through :data:`GAMMA` (tiled scenes stay tiled)."""
+def render(radiance: np.ndarray, times: np.ndarray, height: int, width: int,
+           seed: int = 0) -> ExposureStack:
+    """8-bit brackets of ``radiance`` through :data:`GAMMA`, tiled to ``height x width``."""
     codes = render_brackets(radiance, times, GAMMA.response, seed=seed)
-    return ExposureStack.from_arrays(codes, times)
+    reps = (1, -(-height // radiance.shape[0]), -(-width // radiance.shape[1]), 1)
+    codes = np.tile(codes, reps)[:, :height, :width]
+    return ExposureStack.from_arrays(np.ascontiguousarray(codes), times)
+
+
+def tiled(radiance: np.ndarray, height: int, width: int) -> np.ndarray:
+    """``radiance`` tiled to ``height x width`` (the truth of a :func:`render` stack)."""
+    reps = (-(-height // radiance.shape[0]), -(-width // radiance.shape[1]), 1)
+    return np.tile(radiance, reps)[:height, :width]
 
 
 def ladder_beyond_scene(height: int, width: int) -> ExposureStack:
-    """9 brackets 2 EV apart around a 3-stop scene: the shortest is all dark and the two
+    """9 brackets 2 EV apart around a 3-stop scene: the shortest is all dark and the
     longest all bright (skip ``brackets``)."""
-    return render(narrow_scene(height, width, stops=3.0), exposures(9))
+    return render(narrow_scene(height, width, stops=3.0), exposures(9), height, width)
 
 
 def covered_scene(height: int, width: int) -> ExposureStack:
     """5 brackets 1 EV apart around a 3.5-stop scene: the middle one alone holds every
     code between 25 and 95 % of the range (skip ``covered``)."""
-    return render(narrow_scene(height, width, stops=3.5), exposures(5, 1.0) * 9.0)
+    return render(narrow_scene(height, width, stops=3.5), exposures(5, 1.0) * 9.0,
+                  height, width)
 
 
 def sky_scene(height: int, width: int) -> ExposureStack:
     """7 brackets 2 EV apart of the demo room under a band of open sky (the top 40 % of
-    the rows), which saturates across whole rows in the long exposures (skip
+    each tile's rows), which saturates across whole rows in the long exposures (skip
     ``early-stop``)."""
-    radiance = bracket_stack(height, width, count=2)[1]
-    radiance[: int(0.4 * height)] = np.array([60.0, 70.0, 90.0], np.float32)
-    return render(radiance, exposures(7))
+    radiance = demo_scene(min(height, TILE[0]), min(width, TILE[1])) * 40.0
+    radiance[: int(0.4 * radiance.shape[0])] = np.array([60.0, 70.0, 90.0], np.float32)
+    return render(radiance, exposures(7), height, width)
 
 
 def grey_scene(height: int, width: int) -> ExposureStack:
     """7 brackets of the demo scene's green channel stored as RGB: three identical
     channels (skip ``channels``)."""
-    grey = bracket_stack(height, width, count=2)[1][..., 1:2]
-    codes = render_brackets(grey, exposures(7), GAMMA.response)
-    return ExposureStack.from_arrays(np.repeat(codes, 3, axis=-1), exposures(7))
+    grey = demo_scene(min(height, TILE[0]), min(width, TILE[1]))[..., 1:2] * 40.0
+    stack = render(grey, exposures(7), height, width)
+    return ExposureStack.from_arrays(np.repeat(stack.codes, 3, axis=-1), stack.exposures)

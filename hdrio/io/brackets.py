@@ -6,7 +6,9 @@ import contextlib
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -198,9 +200,9 @@ def read_brackets(
         Stop decoding once a bracket has every code value well exposed, and keep only it
         (for a merge with a saved response: :mod:`hdrio.skips`, ``covered``).
 
-    Brackets are decoded from the middle of the exposure ladder outwards, each straight
-    into its slot of one array, staged in a temporary file beyond the memory budget
-    (:mod:`hdrio.io.staging`).
+    Brackets are decoded from the middle of the exposure ladder outwards, two at a time
+    (one towards each end), each straight into its slot of one array, staged in a
+    temporary file beyond the memory budget (:mod:`hdrio.io.staging`).
 
     Without either, EXIF is used when every file has an exposure time, else the
     file-name convention when every name has one. Raises :class:`InputError` naming the
@@ -235,24 +237,43 @@ def read_brackets(
     kinds = [""] * count
     kept = [0, count]  # positions (in exposure order) still kept: kept[0] .. kept[1] - 1
     reasons: dict[int, str] = {}
-    covering = None
-    for done, position in enumerate(_middle_out(count), start=1):
+    found: list[int] = []  # a covering bracket, when stop_when_covered
+    lock = threading.Lock()
+    done = [0]
+
+    def decode(position: int) -> None:
         j = order[position]
-        if kept[0] <= position < kept[1]:
-            with _open(paths[j]) as (image, header):
-                if header.shape != first.shape or header.code_max != first.code_max:
-                    raise InputError(paths[j], "changed while being read")
-                _decode_into(image, header, codes[position])
-            kinds[position] = classify(codes[position], first.code_max)
-            release(codes, position)
+        with _open(paths[j]) as (image, header):
+            if header.shape != first.shape or header.code_max != first.code_max:
+                raise InputError(paths[j], "changed while being read")
+            _decode_into(image, header, codes[position])
+        kinds[position] = classify(codes[position], first.code_max)
+        release(codes, position)
+        with lock:
             if skip_brackets:
-                _drop_beyond(position, kinds[position], kept, reasons)
-            if stop_when_covered and kinds[position] == "covers":
-                covering = position
-        if progress:
-            progress(done, count, str(paths[j]))
-        if covering is not None:
-            break
+                _drop_beyond(position, kinds[position], count, kept, reasons)
+            if stop_when_covered and kinds[position] == "covers" and not found:
+                found.append(position)
+            done[0] += 1
+            if progress:
+                progress(done[0], count, str(paths[j]))
+
+    def chain(positions: list[int]) -> None:
+        for position in positions:
+            with lock:
+                wanted = kept[0] <= position < kept[1] and not found
+            if wanted:
+                decode(position)
+
+    # Two chains from the middle outwards, one towards the shortest exposure and one
+    # towards the longest, decoded at once (OpenImageIO releases the GIL while decoding):
+    # each stops where its side turns all dark or all bright.
+    middle = count // 2
+    sides = ([*range(middle, -1, -1)], [*range(middle + 1, count)])
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="hdrio-read") as pool:
+        for future in [pool.submit(chain, side) for side in sides]:
+            future.result()
+    covering = found[0] if found else None
     if covering is not None:
         kept = [covering, covering + 1]
     names = [str(paths[j]) for j in order]
@@ -272,26 +293,21 @@ def read_brackets(
     )
 
 
-def _middle_out(count: int) -> list[int]:
-    """Exposure positions in decoding order: the middle, then shorter ones down to the
-    shortest, then longer ones up to the longest."""
-    middle = count // 2
-    return [*range(middle, -1, -1), *range(middle + 1, count)]
-
-
-def _drop_beyond(position: int, kind: str, kept: list[int], reasons: dict[int, str]) -> None:
+def _drop_beyond(position: int, kind: str, count: int, kept: list[int],
+                 reasons: dict[int, str]) -> None:
     """Drop an all-dark bracket and every shorter one, or an all-bright bracket and every
-    longer one, as long as two brackets remain."""
-    if kind == "dark" and kept[1] - (position + 1) >= 2:
+    longer one; never the middle two (``count // 2`` and the next), so two remain."""
+    middle = count // 2
+    if kind == "dark" and position < middle:
         for p in range(kept[0], position + 1):
             reasons[p] = ("no well-exposed pixel (all dark)" if p == position
                           else "shorter than an all-dark bracket: not decoded")
-        kept[0] = position + 1
-    elif kind == "bright" and position - kept[0] >= 2:
+        kept[0] = max(kept[0], position + 1)
+    elif kind == "bright" and position > middle + 1:
         for p in range(position, kept[1]):
             reasons[p] = ("no well-exposed pixel (all bright)" if p == position
                           else "longer than an all-bright bracket: not decoded")
-        kept[1] = position
+        kept[1] = min(kept[1], position)
 
 
 def _raw_stack(paths: list[Path], exposures, exposures_from, progress,

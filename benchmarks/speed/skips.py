@@ -1,0 +1,104 @@
+"""The skips of ``hdrio.skips``, each on a scene built to need it, timed on and off.
+
+Every pair of rows runs the same call in the same process, once with the skip and once
+with ``--no-skip`` for it (``MergeOptions.no_skip``), so the time it saves is their
+difference. Whole ``hdrio merge`` runs (JPEGs in, half EXR out) where the skip acts on
+reading, the solve or the merge; the solve or the merge alone where that is all it
+touches.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from benchmarks.speed.endtoend import write_jpegs
+from benchmarks.speed.scene import (
+    bracket_stack,
+    covered_scene,
+    grey_scene,
+    ladder_beyond_scene,
+    sky_scene,
+    true_response,
+)
+from benchmarks.timing import measure_call
+from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.pipeline import MergeOptions, merge_files
+from hdrio.response import response_Debevec1997
+
+
+def _pair(rows: list[dict], name: str, scene: str, on, off, repeats: int) -> None:
+    for state, call in (("on", on), ("off", off)):
+        timing = measure_call(call, repeats, warmup=1)
+        rows.append({"row": "skips", "method": f"{name} {state}: {scene}",
+                     "skip": name, "state": state, "seconds": timing.seconds,
+                     "peak_mb": timing.peak_mb})
+
+
+def _merge_files(paths, output, exposures, **options):
+    return lambda: merge_files(paths, output, exposures=exposures,
+                               options=MergeOptions(**options))
+
+
+def run(height: int, width: int, repeats: int) -> list[dict]:
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory(prefix="hdrio-skips-") as folder:
+        folder = Path(folder)
+        ladder = ladder_beyond_scene(height, width)
+        (folder / "ladder").mkdir()
+        paths = write_jpegs(ladder, folder / "ladder")
+        exposures = [repr(float(t)) for t in ladder.exposures]
+        ladder = None
+        _pair(rows, "brackets", "9 JPEGs, the shortest all dark, the longest all bright",
+              _merge_files(paths, folder / "a.exr", exposures),
+              _merge_files(paths, folder / "a.exr", exposures, no_skip=("brackets",)),
+              repeats)
+
+        stack, _ = bracket_stack(height, width, 7)
+        (folder / "main").mkdir()
+        paths = write_jpegs(stack, folder / "main")
+        exposures = [repr(float(t)) for t in stack.exposures]
+        stack = None
+        saved = folder / "saved.exr"
+        merge_files(paths, saved, exposures=exposures)
+        _pair(rows, "response", "the benchmark's 7 JPEGs, response saved from a first merge",
+              _merge_files(paths, folder / "b.exr", exposures, response_from=str(saved)),
+              _merge_files(paths, folder / "b.exr", exposures), repeats)
+
+        covered = covered_scene(height, width)
+        (folder / "covered").mkdir()
+        paths = write_jpegs(covered, folder / "covered")
+        exposures = [repr(float(t)) for t in covered.exposures]
+        covered = None
+        merge_files(paths, saved, exposures=exposures, options=MergeOptions(no_skip=("covered",)))
+        _pair(rows, "covered", "5 JPEGs 1 EV apart of a 3.5-stop scene",
+              _merge_files(paths, folder / "c.exr", exposures),
+              _merge_files(paths, folder / "c.exr", exposures, no_skip=("covered",)), repeats)
+        _pair(rows, "covered", "the same with a saved response (one JPEG decoded)",
+              _merge_files(paths, folder / "c.exr", exposures, response_from=str(saved)),
+              _merge_files(paths, folder / "c.exr", exposures, response_from=str(saved),
+                           no_skip=("covered",)), repeats)
+
+    grey = grey_scene(height, width)
+    _pair(rows, "channels", "7 brackets of a grey scene stored as RGB (solve only)",
+          lambda: response_Debevec1997(grey),
+          lambda: response_Debevec1997(grey, solve_identical_once=False), repeats)
+    grey = None
+    sky = sky_scene(height, width)
+    response = true_response()
+    _pair(rows, "early-stop", "7 brackets, open sky over 40 % of the rows (merge only)",
+          lambda: merge_brackets(sky, response)[0],
+          lambda: merge_brackets(sky, response, early_stop=False)[0], repeats)
+    return rows
+
+
+def saved_ratios(rows: list[dict]) -> dict[str, float]:
+    """``off / on`` time for each scene: how many times faster the skip made it."""
+    seconds = {row["method"]: row["seconds"] for row in rows if row.get("row") == "skips"}
+    out = {}
+    for method, on in seconds.items():
+        if " on: " in method:
+            off = seconds.get(method.replace(" on: ", " off: "))
+            if off and on:
+                out[f"skip {method.replace(' on: ', ': ')}: off / on"] = off / on
+    return out
