@@ -53,6 +53,9 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
         "end to end: hdrio / I/O floor": _ratio(rows, next(
             (row["method"] for row in rows if row.get("end_to_end") == "hdrio"), ""),
             "I/O floor (decode JPEGs + write EXR)"),
+        "end to end: hdrio / I/O floor decoding two at once": _ratio(rows, next(
+            (row["method"] for row in rows if row.get("end_to_end") == "hdrio"), ""),
+            "I/O floor, two JPEGs decoded at once as hdrio does"),
         **skips.saved_ratios(rows),
     }
 
