@@ -7,15 +7,18 @@ level ``z`` (``n`` of them) and ``ln E_i`` for every sample ``i`` (``N`` of them
 * the gauge ``g(z_mid) = 0`` (``z_mid = n // 2``, code 128 for 8-bit)
 * smoothness for ``z = 1 .. n-2``:  ``lambda w(z) (g(z-1) - 2 g(z) + g(z+1)) = 0``
 
-The matrix ``A`` ((N P + n - 1) x (n + N)) is stored sparse and never densified. We solve
-the normal equations by eliminating the ``ln E`` block, whose normal matrix is diagonal:
-the Schur complement is an ``n x n`` matrix, so the work is ``O(N P + n^3)`` whatever the
-sample count, and two steps of iterative refinement against the sparse residual bring the
-result to the accuracy of a dense least-squares solve. Normal equations square the
-condition number, so when the reduced matrix is ill-conditioned (a huge ``lambda``, say)
-we solve the same reduced problem by SVD instead: the ``ln E`` unknowns are projected out
-of each sample's rows, leaving a dense ``(N P + n - 1) x n`` least-squares problem whose
-singular values also tell a genuinely undetermined response from a merely stiff one.
+The matrix ``A`` ((N P + n - 1) x (n + N)) is defined, sparse, by
+:func:`debevec1997_system`, the reference the tests solve densely; the solve itself never
+builds it (:mod:`hdrio.response.normal_equations`). We solve the normal equations by
+eliminating the ``ln E`` block, whose normal matrix is diagonal: the Schur complement is
+an ``n x n`` matrix accumulated straight from the samples' code pairs, so the work is
+``O(N P^2 + n^3)`` whatever the sample count, and up to two steps of iterative refinement
+against the exact residual bring the result to the accuracy of a dense least-squares
+solve. Normal equations square the condition number, so when the reduced matrix is
+ill-conditioned (a huge ``lambda``, say) we solve the same reduced problem by SVD
+instead: the ``ln E`` unknowns are projected out of each sample's rows, leaving a dense
+``(N P + n - 1) x n`` least-squares problem whose singular values also tell a genuinely
+undetermined response from a merely stiff one.
 
 Unknowns that no equation touches (codes whose weight is zero and that no active
 smoothness row reaches, samples with zero weight in every bracket) take the value 0, as
@@ -32,13 +35,25 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 
 from hdrio.errors import ResponseSolveError
+from hdrio.merge.weighting import weighting_tutorial_hat, weights_table
+from hdrio.response.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
+from hdrio.response.normal_equations import (
+    Debevec1997Rows,
+    IllConditioned,
+    ReducedNormalSolver,
+)
+from hdrio.response.sampling import (
+    DEFAULT_SAMPLES,
+    SAMPLING_METHODS,
+    sample_codes,
+    tutorial_sample_count,
+)
 
 DEFAULT_SMOOTHING = 50.0
-_NORMAL_RCOND = 1e-12  # below this reciprocal condition, the normal equations lose digits
+_REFINED = 1e-12  # a refinement step this small (relative to g's range) ends refinement
 _SVD_RCOND = 1e-13  # below this singular value ratio, the response is undetermined
 _UNDETERMINED = (
     "the samples do not determine the camera response (the brackets show too little "
@@ -81,42 +96,6 @@ def debevec1997_system(Z, log_exposures, smoothing: float, weights,
     b = np.zeros(shape[0])
     b[: n_samples * n_brackets] = w * B.reshape(-1)
     return A, b
-
-
-class _IllConditioned(Exception):
-    pass
-
-
-class _ReducedNormalSolver:
-    """Solve ``A^T A x = r`` by eliminating the diagonal ``ln E`` block (Schur complement)."""
-
-    def __init__(self, A: sp.csr_matrix, n: int) -> None:
-        normal = (A.T @ A).tocsr()
-        self.n = n
-        g_g = normal[:n, :n].toarray()
-        self.g_l = normal[:n, n:].tocsr()
-        l_diag = normal.diagonal()[n:]
-        self.l_inverse = np.divide(1.0, l_diag, out=np.zeros_like(l_diag), where=l_diag > 0)
-        schur = g_g - (self.g_l @ sp.diags(self.l_inverse) @ self.g_l.T).toarray()
-        self.g_active = np.diag(g_g) > 0
-        reduced = schur[np.ix_(self.g_active, self.g_active)]
-        try:
-            self.factor = scipy.linalg.cho_factor(reduced)
-        except np.linalg.LinAlgError:
-            raise _IllConditioned from None
-        # LAPACK's 1-norm reciprocal condition estimate from the Cholesky factor, O(n^2).
-        rcond, info = scipy.linalg.lapack.dpocon(self.factor[0], np.abs(reduced).sum(0).max(),
-                                                 uplo="L" if self.factor[1] else "U")
-        if info != 0 or rcond <= _NORMAL_RCOND:
-            raise _IllConditioned
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        r_g, r_l = r[: self.n], r[self.n:]
-        rhs = r_g - self.g_l @ (self.l_inverse * r_l)
-        g = np.zeros(self.n)
-        g[self.g_active] = scipy.linalg.cho_solve(self.factor, rhs[self.g_active])
-        log_e = self.l_inverse * (r_l - self.g_l.T @ g)
-        return np.concatenate([g, log_e])
 
 
 def _solve_projected_svd(Z: np.ndarray, B: np.ndarray, smoothing: float,
@@ -170,6 +149,10 @@ def g_solve_Debevec1997(Z, log_exposures, smoothing: float = DEFAULT_SMOOTHING,
         ``lambda``, the weight of the smoothness rows (50 in the tutorial).
     weights
         ``w(z)`` at each of the ``n`` levels (default: the tutorial's hat over 256 codes).
+    refinement_steps
+        At most this many steps of iterative refinement after the normal-equation solve;
+        they stop early once a step changes nothing above ``1e-12`` of the range of
+        ``g`` (with lambda up to 1e3 the first step is already that small).
 
     Returns
     -------
@@ -184,27 +167,28 @@ def g_solve_Debevec1997(Z, log_exposures, smoothing: float = DEFAULT_SMOOTHING,
         If the samples leave the response undetermined.
     """
     if weights is None:
-        from hdrio.merge.weighting import weighting_tutorial_hat
-
         weights = weighting_tutorial_hat(np.arange(256), 0, 255)
     weights = np.asarray(weights, dtype=np.float64)
     n = weights.size
-    A, b = debevec1997_system(Z, log_exposures, smoothing, weights)
-    # Weigh the gauge row like the heaviest column, not 1: with lambda in the thousands
+    Z = np.ascontiguousarray(Z, dtype=np.intp)
+    B = np.broadcast_to(np.asarray(log_exposures, dtype=np.float64), Z.shape)
+    # The gauge row weighs like the heaviest column, not 1: with lambda in the thousands
     # (16-bit levels, many samples) a unit row left the reduced normal matrix near
     # singular (rcond ~ 1e-13) and sent the solve to the slow SVD path.
-    heaviest = float(np.sqrt(np.max(np.asarray(A.multiply(A).sum(axis=0)))))
-    A, b = debevec1997_system(Z, log_exposures, smoothing, weights, max(1.0, heaviest))
+    rows = Debevec1997Rows(Z, B, weights, smoothing)
     try:
-        solver = _ReducedNormalSolver(A, n)
-    except _IllConditioned:
-        Z = np.asarray(Z, dtype=np.int64)
-        B = np.broadcast_to(np.asarray(log_exposures, dtype=np.float64), Z.shape)
+        solver = ReducedNormalSolver(rows)
+    except IllConditioned:
         return _solve_projected_svd(Z, B, smoothing, weights)
-    x = solver.solve(A.T @ b)
-    for _ in range(refinement_steps):
-        x += solver.solve(A.T @ (b - A @ x))
-    return x[:n], x[n:]
+    g, log_e = np.zeros(n), np.zeros(Z.shape[0])
+    for step in range(1 + refinement_steps):  # the solve, then iterative refinement
+        step_g, step_l = solver.solve(*rows.normal_residual(g, log_e))
+        g += step_g
+        log_e += step_l
+        if step and max(np.abs(step_g).max(), np.abs(step_l).max(initial=0.0)) <= (
+                _REFINED * np.ptp(g)):
+            break
+    return g, log_e
 
 
 def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
@@ -248,15 +232,6 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
     (unless ``solve_identical_once`` is false: the same curves, solved again);
     ``parameters["channels_solved"]`` says how many solves ran.
     """
-    from hdrio.merge.weighting import weights_table
-    from hdrio.response.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
-    from hdrio.response.sampling import (
-        DEFAULT_SAMPLES,
-        SAMPLING_METHODS,
-        sample_codes,
-        tutorial_sample_count,
-    )
-
     code_max = stack.code_max
     levels = levels or (code_max + 1 if code_max < 1024 else 1024)
     sampler = SAMPLING_METHODS[sampling]
