@@ -283,6 +283,9 @@ def read_brackets(
     # each stops where its side turns all dark or all bright.
     middle = count // 2
     sides = ([*range(middle, -1, -1)], [*range(middle + 1, count)])
+    if stop_when_covered:  # the middle bracket alone first: the likeliest to cover
+        decode(middle)
+        sides = (sides[0][1:], sides[1])
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="hdrio-read") as pool:
         for future in [pool.submit(chain, side) for side in sides]:
             future.result()
