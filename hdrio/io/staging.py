@@ -77,3 +77,25 @@ def _mapping_address(codes: np.memmap) -> int:
     while isinstance(base.base, np.ndarray):
         base = base.base
     return base.ctypes.data - int(getattr(base, "offset", 0))
+
+
+def strided_copy(codes: np.ndarray, stride: int) -> np.ndarray:
+    """``codes[:, ::stride, ::stride]`` as an ordinary array, one bracket at a time,
+    releasing each staged bracket's pages after it: the page cache maps a file in large
+    folios (up to 2 MB), so even every 39th row maps most of a bracket."""
+    grid = np.empty((codes.shape[0], *codes[0, ::stride, ::stride].shape), codes.dtype)
+    for j in range(codes.shape[0]):
+        grid[j] = codes[j, ::stride, ::stride]
+        release(codes, j)
+    return grid
+
+
+def gather_pixels(codes: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Code values ``(P, N, C)`` at flat pixel ``indices`` of ``(P, H, W, C)`` codes, one
+    bracket at a time (releasing, as :func:`strided_copy`)."""
+    count, height, width, channels = codes.shape
+    out = np.empty((count, indices.size, channels), codes.dtype)
+    for j in range(count):
+        out[j] = codes[j].reshape(height * width, channels)[indices]
+        release(codes, j)
+    return out

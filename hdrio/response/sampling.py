@@ -38,6 +38,7 @@ import math
 
 import numpy as np
 
+from hdrio.io.staging import gather_pixels, strided_copy
 from hdrio.registry import MethodRegistry
 from hdrio.response.kernels import draw_from_bins
 
@@ -89,7 +90,7 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     """
     count, height, width, channels = codes.shape
     stride = candidate_stride(height, width)
-    grid = codes[:, ::stride, ::stride]
+    grid = strided_copy(codes, stride)  # staged codes: a bracket's pages at a time
     grid_w = grid.shape[2]
     unclipped, labels = _scan_candidates(grid, code_max)
     informative = np.count_nonzero(unclipped, axis=0) >= 2
@@ -119,8 +120,8 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
 def _scan_candidates(grid: np.ndarray, code_max: int) -> tuple[np.ndarray, np.ndarray]:
     """Per bracket and grid pixel: unclipped in every channel, and the bin of its mean code.
 
-    ``grid`` is the ``(P, h, w, C)`` strided view of the codes. It is copied once into
-    channel planes, one read of the full-resolution memory it points into; every test
+    ``grid`` is the ``(P, h, w, C)`` candidate grid. It is copied once into channel
+    planes; every test
     then runs in place on small contiguous arrays of the narrowest integer type (tests
     on the interleaved view cost about twice as much, and grid-sized float64 temporaries
     are slow to allocate: a float64 bin division took 0.5 ms of the 9 ms call in a
@@ -146,5 +147,4 @@ SAMPLING_METHODS: MethodRegistry = MethodRegistry(
 
 def sample_codes(codes: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Code values at flat pixel ``indices``: shape ``(N, P, C)`` (sample, bracket, channel)."""
-    count, height, width, channels = codes.shape
-    return codes.reshape(count, height * width, channels)[:, indices, :].transpose(1, 0, 2)
+    return gather_pixels(codes, indices).transpose(1, 0, 2)
