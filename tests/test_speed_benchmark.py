@@ -28,3 +28,13 @@ def test_speed_benchmark_writes_rows_and_ratios(tmp_path, capsys):
 
 def test_unknown_section_is_refused(tmp_path):
     assert main(["--only", "nope", "--out", str(tmp_path)]) == 2
+
+
+def test_skips_section_times_every_skip_on_and_off(tmp_path):
+    from hdrio.skips import SKIPS
+
+    assert main(["--width", "96", "--height", "64", "--repeats", "1", "--only", "skips",
+                 "--out", str(tmp_path)]) == 0
+    rows = json.loads((tmp_path / "speed.json").read_text())["rows"]
+    timed = {(row["skip"], row["state"]) for row in rows if row["row"] == "skips"}
+    assert timed == {(name, state) for name in SKIPS for state in ("on", "off")}

@@ -12,8 +12,12 @@ longer one. The kernel walks the brackets longest first and *resets* a channel's
 where it meets a saturated code: ``sum = (sum + table[z]) * (z != Z_max)``. What
 survives is exactly the sum over the brackets shorter than the first saturated one, with
 no per-channel state to load and store and no data-dependent branch (on this machine
-1.3x faster than carrying an "alive" flag). The tutorial's policy (``per_channel``
-false) resets all of a pixel's channels when any one saturates.
+1.3x faster than carrying an "alive" flag). With the tables 0 at ``Z_max`` that is
+``sum * (z != Z_max) + table[z]``, a fused multiply-add, and the default policy takes
+two brackets per pass over the row (half the loads and stores of the sums). The
+tutorial's policy (``per_channel`` false) resets all of a pixel's channels when any one
+saturates. Measured at 7 x 24 MP: 0.38 s of CPU, against 0.86 s for the previous
+pixel-at-a-time kernel with its saturation flags (``hdrio`` 0.1, commit 52a476c).
 
 A channel with no weight left takes the estimate of the longest bracket it was not
 dropped from, or the shortest bracket's if it is saturated even there (a rare path that
