@@ -61,35 +61,36 @@ def test_brackets_beyond_the_scene_are_dropped_and_not_decoded(tmp_path, monkeyp
         original(image, header, out)
 
     monkeypatch.setattr(brackets_module, "_decode_into", counting)
-    # Make the two longest brackets all bright: the longest is then never decoded.
-    write_image(paths[7], np.full_like(stack.codes[7], 250), "uint8")
     kept = read_brackets(paths, exposures=exposures)
-    assert [name for name, _ in kept.dropped] == [str(paths[0]), str(paths[7]), str(paths[8])]
-    assert "b8.png" not in decoded and len(decoded) == 8
-    assert "not decoded" in dict(kept.dropped)[str(paths[8])]
+    assert [name for name, _ in kept.dropped] == [str(paths[j]) for j in (0, 1, 7, 8)]
+    assert sorted(decoded) == [f"b{j}.png" for j in range(1, 8)]
+    reasons = dict(kept.dropped)
+    assert "all dark" in reasons[str(paths[1])] and "all bright" in reasons[str(paths[7])]
+    assert "not decoded" in reasons[str(paths[0])] and "not decoded" in reasons[str(paths[8])]
     everything = read_brackets(paths, exposures=exposures, skip_brackets=False)
     assert everything.count == 9 and not everything.dropped
 
 
-def test_dropping_brackets_moves_the_merge_little_and_towards_the_scene(tmp_path):
+def test_dropping_brackets_moves_the_merge_towards_the_scene(tmp_path):
     # The dropped brackets' codes all lie within 5 % of an end of the range, where the
-    # estimates are noisiest (code 5 is quantised to 40 %) and the triangle weights
-    # small. Measured with the same response both ways: median 0.28 %, p99 6.0 % apart,
-    # and the skip is the closer to the scene (median 1.38 % against 1.69 %, p99 5.4 %
-    # against 7.4 %). Bounds: 1 % and 10 % apart, and no further from the scene.
+    # estimates are noisiest (code 5 is quantised to 40 %) and only the triangle's small
+    # weights keep them in. Measured with the same response both ways: median 2.1 %,
+    # p99 13 % apart, and the skip is the closer to the scene (median 1.45 % against
+    # 2.63 %, p99 5.5 % against 12.9 %). Bounds: 3 % and 15 % apart, and closer to the
+    # scene at the median and the 99th percentile.
     stack = ladder_beyond_scene(*SIZE)
     paths, exposures = _write(stack, tmp_path / "in")
     response = true_response()
     on = read_brackets(paths, exposures=exposures)
     off = read_brackets(paths, exposures=exposures, skip_brackets=False)
-    assert on.count == 7 and off.count == 9
+    assert on.count == 5 and off.count == 9
     merged_on = merge_stack(on, _only_off("covered"), response=response).radiance
     merged_off = merge_stack(off, _only_off("covered"), response=response).radiance
     difference = np.abs(merged_on / merged_off - 1)
-    assert np.median(difference) < 0.01 and np.percentile(difference, 99) < 0.10
+    assert np.median(difference) < 0.03 and np.percentile(difference, 99) < 0.15
     truth = tiled(narrow_scene(*SIZE, stops=3.0), *SIZE)
-    assert radiance_error(merged_on, truth)["median"] <= radiance_error(merged_off,
-                                                                        truth)["median"]
+    error_on, error_off = radiance_error(merged_on, truth), radiance_error(merged_off, truth)
+    assert error_on["median"] < error_off["median"] and error_on["p99"] < error_off["p99"]
 
 
 def test_saved_response_skips_the_solve_and_gives_the_same_exr(tmp_path, capsys):

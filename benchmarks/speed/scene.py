@@ -74,9 +74,10 @@ def tiled(radiance: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def ladder_beyond_scene(height: int, width: int) -> ExposureStack:
-    """9 brackets 2 EV apart around a 3-stop scene: the shortest is all dark and the
-    longest all bright (skip ``brackets``)."""
-    return render(narrow_scene(height, width, stops=3.0), exposures(9), height, width)
+    """9 brackets 2.5 EV apart around a 3-stop scene: the two shortest are all dark and
+    the two longest all bright, so the outermost ones need not even be decoded (skip
+    ``brackets``)."""
+    return render(narrow_scene(height, width, stops=3.0), exposures(9, 2.5), height, width)
 
 
 def covered_scene(height: int, width: int) -> ExposureStack:

@@ -9,6 +9,7 @@ reading or the merge; the solve or the merge alone where that is all it touches 
 
 from __future__ import annotations
 
+import statistics
 import tempfile
 from pathlib import Path
 
@@ -29,11 +30,18 @@ from hdrio.response.stored import read_response
 
 
 def _pair(rows: list[dict], name: str, scene: str, on, off, repeats: int) -> None:
-    for state, call in (("on", on), ("off", off)):
-        timing = measure_call(call, repeats, warmup=1)
-        rows.append({"row": "skips", "method": f"{name} {state}: {scene}",
-                     "skip": name, "state": state, "seconds": timing.seconds,
-                     "peak_mb": timing.peak_mb})
+    """Time ``on`` and ``off`` alternately (one of each per repeat, after one warm-up
+    each), so a drift in the machine's speed falls on both alike; medians."""
+    timings = {"on": [], "off": []}
+    calls = {"on": on, "off": off}
+    for state in calls:
+        calls[state]()
+    for _ in range(max(1, repeats)):
+        for state, call in calls.items():
+            timings[state].append(measure_call(call, 1).seconds)
+    for state, times in timings.items():
+        rows.append({"row": "skips", "method": f"{name} {state}: {scene}", "skip": name,
+                     "state": state, "seconds": statistics.median(times)})
 
 
 def _merge_files(paths, output, exposures, **options):
