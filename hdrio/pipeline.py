@@ -110,7 +110,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     """
     say = progress or (lambda message: None)
     skips = options.skips
-    skipped = SkipReport(enabled=skips, dropped=list(stack.dropped))
+    skipped = SkipReport(dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if response is None:

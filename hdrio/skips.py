@@ -85,7 +85,6 @@ def classify(codes: np.ndarray, code_max: int) -> str:
 class SkipReport:
     """What was skipped, for the summary (seconds saved are not known, only the work)."""
 
-    enabled: frozenset[str] = frozenset(SKIPS)
     dropped: list[tuple[str, str]] = field(default_factory=list)
     """``(file, reason)`` of every bracket dropped, decoded or not."""
     covering: str | None = None
