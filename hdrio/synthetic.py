@@ -11,6 +11,8 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
+from hdrio.skips import WELL_EXPOSED
+
 Response = Callable[[np.ndarray], np.ndarray]
 
 
@@ -85,8 +87,8 @@ def render_brackets(radiance: np.ndarray, exposures, response: Response = gamma_
     return out
 
 
-def well_exposed(codes: np.ndarray, code_max: int, low: float = 0.05,
-                 high: float = 0.95) -> np.ndarray:
+def well_exposed(codes: np.ndarray, code_max: int, low: float = WELL_EXPOSED[0],
+                 high: float = WELL_EXPOSED[1]) -> np.ndarray:
     """``(H, W)``: pixels with every channel inside ``(low, high) * code_max`` in some bracket."""
     inside = np.all((codes > low * code_max) & (codes < high * code_max), axis=-1)
     return np.any(inside, axis=0)

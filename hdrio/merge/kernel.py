@@ -146,12 +146,12 @@ def _accumulate_pair(longer, shorter, weighted_longer, weighted_shorter, weights
 
 
 @njit(cache=True, nogil=True)
-def _fallback(codes, y, x, c, channels, count, code_max, per_channel,
+def _fallback(codes, y, x, c, channels, code_max, per_channel,
               estimates):  # pragma: no cover - compiled
     """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
     from (the shortest bracket's if it is saturated even there)."""
     kept = 0
-    while kept < count:
+    while kept < codes.shape[0]:
         row = codes[kept, y]
         saturated = row[x * channels + c] == code_max
         if not per_channel:
@@ -244,7 +244,7 @@ def merge_kernel(codes, top, bottom, weighted, estimates, weights, code_max,
                 for i in range(n):
                     if denominator[i] <= 0.0:
                         value = _fallback(codes, y, i // channels, i % channels,
-                                          channels, count, code_max, per_channel,
+                                          channels, code_max, per_channel,
                                           estimates)
                         row[i] = min(max(value, low), high)
             skipped_rows[y] = (count - stop) * (n // channels)
