@@ -162,7 +162,11 @@ def test_early_stop_gives_the_same_radiance(saturation):
     off = merge_stack(stack, MergeOptions(saturation=saturation, no_skip=("early-stop",)),
                       response=true_response())
     assert on.skipped.early_stop_fraction > 0.2 and off.skipped.early_stop_fraction == 0
-    np.testing.assert_array_equal(on.radiance, off.radiance)
+    # A stopped row pairs its brackets differently in the pair tables, which rounds the
+    # float32 sums differently: a few ulps of ln E (|ln E| < 10 here, where an ulp is
+    # 1e-6 of E; 1.06e-6 observed), far below any real change (a code off by one moves
+    # E by 1e-3 or more).
+    np.testing.assert_allclose(on.radiance, off.radiance, rtol=4e-6)
 
 
 def test_summary_reports_the_skips_and_no_skip_all_turns_them_off(tmp_path, capsys):

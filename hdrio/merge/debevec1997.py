@@ -38,7 +38,7 @@ import numba
 import numpy as np
 
 from hdrio.io.staging import is_staged, release
-from hdrio.merge.kernel import MAX_BRACKETS, exp_in_place, merge_kernel
+from hdrio.merge.kernel import MAX_BRACKETS, PAIR_LEVELS, merge_kernel, pair_tables
 from hdrio.merge.weighting import weights_table
 from hdrio.parallel import threads
 from hdrio.registry import MethodRegistry
@@ -108,7 +108,12 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
                          f"brackets have {channels}")
     if count > MAX_BRACKETS:
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
-    weighted, estimates, weights = merge_tables(response, stack.exposures, weighting, domain)
+    terms, estimates = merge_tables(response, stack.exposures, weighting, domain)
+    if saturation == "channel" and channels == 3 and stack.code_max < PAIR_LEVELS:
+        pairs = pair_tables(terms, stack.code_max)
+    else:
+        pairs = np.empty((0, channels, 1), np.complex64)  # the general path
+    terms = terms.astype(np.complex64)
     radiance = np.empty((height, width, channels), dtype=np.float32)
     counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
     # The same thread count as every other kernel (HDRIO_THREADS, else the CPUs we have).
@@ -117,12 +122,10 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     band = MERGE_BAND_ROWS if is_staged(stack.codes) else height
     for top in range(0, height, band):
         bottom = min(height, top + band)
-        merge_kernel(codes, top, bottom, weighted, estimates, weights, stack.code_max,
+        merge_kernel(codes, top, bottom, terms, estimates, pairs, stack.code_max,
                      saturation == "channel", domain == "log", early_stop,
                      radiance.reshape(height, width * channels), *counts)
         release(stack.codes, None, top, bottom)
-    if domain == "log":
-        exp_in_place(radiance)
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=int(counts[0].sum()),
         black_everywhere=int(counts[1].sum()), observations_skipped=int(counts[2].sum()),
@@ -131,9 +134,10 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
 
 
 def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str,
-                 domain: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The kernel's float64 tables: ``w(z) x_j(z)`` and ``x_j(z)`` ``(P, C, levels)``,
-    ``w(z)`` ``(C, levels)``, with ``w(Z_max) = 0``.
+                 domain: str) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's tables ``(P, C, levels)``: the terms ``w(z) x_j(z) + i w(z)``
+    (complex128: the numerator's term, the denominator's), with ``w(Z_max) = 0``, and
+    the estimates ``x_j(z)`` (float64).
 
     Per channel, codes where ``g`` is extrapolated (no weighted sample fell there) say
     little about radiance, so they get no weight; the fallbacks still cover every pixel.
@@ -143,7 +147,7 @@ def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str
     weights = np.ascontiguousarray(weights.T)
     estimates = np.ascontiguousarray(
         estimate_tables(response, exposures, domain).transpose(0, 2, 1))
-    return weights[None] * estimates, estimates, weights
+    return weights[None] * estimates + 1j * weights[None], estimates
 
 
 def _merge_log(stack, response, weighting="Debevec1997", saturation="channel",

@@ -3,9 +3,9 @@
 For each pixel and channel the kernel sums ``sum_j w(Z_j) x_j`` and ``sum_j w(Z_j)``,
 where ``x_j`` is the bracket's estimate from a per-exposure lookup table (``g(z) - ln
 dt_j`` in the log domain, ``f^-1(z) / dt_j`` in the linear domain). It works a row at a
-time: for each bracket it streams that bracket's row of codes once through two tables
-(``w(z) x_j(z)`` and ``w(z)``) into two row accumulators that stay in the core's cache,
-then writes the row's result. Nothing but the output is written to memory.
+time: it streams each bracket's row of codes once through lookup tables into two row
+accumulators that stay in the core's cache, then writes the row's result (exponentiated
+there in the log domain). Nothing but the output is written to memory.
 
 Saturation (a code at ``Z_max``) drops the observation from its bracket and from every
 longer one. The kernel walks the brackets longest first and *resets* a channel's sums
@@ -13,11 +13,26 @@ where it meets a saturated code: ``sum = (sum + table[z]) * (z != Z_max)``. What
 survives is exactly the sum over the brackets shorter than the first saturated one, with
 no per-channel state to load and store and no data-dependent branch (on this machine
 1.3x faster than carrying an "alive" flag). With the tables 0 at ``Z_max`` that is
-``sum * (z != Z_max) + table[z]``, a fused multiply-add, and the default policy takes
-two brackets per pass over the row (half the loads and stores of the sums). The
-tutorial's policy (``per_channel`` false) resets all of a pixel's channels when any one
-saturates. Measured at 7 x 24 MP: 0.38 s of CPU, against 0.86 s for the previous
-pixel-at-a-time kernel with its saturation flags (``hdrio`` 0.1, commit 52a476c).
+``sum * (z != Z_max) + table[z]``, a fused multiply-add. The tutorial's policy
+(``per_channel`` false) resets all of a pixel's channels when any one saturates.
+
+**Pair tables (8-bit codes, three channels, per-channel policy: the common case).** The
+kernel is bound by its scalar table look-ups (about ten instructions per code value; this
+machine's AVX-512 gathers are slower still). Two brackets ``j`` (longer) and ``j - 1``
+are therefore looked up together: one table per pair and channel indexed by both codes,
+``z_j * levels + z_{j-1}``, holds the pair's summed terms already (``T = t_j(z_j)
+s(z_{j-1}) + t_{j-1}(z_{j-1})``, with ``s`` the shorter bracket's reset), so a pair costs
+one look-up where two brackets cost two each, and the sums take one fused multiply-add
+per pair: ``sum = sum * r_j r_{j-1} + T``. An odd bracket out (the shortest) pairs with
+a row of zero codes. The tables hold 65536 entries per pair and channel (1.5 MB a
+pair), but a pair of brackets only ever shows the codes near its response curves, so
+the entries in use stay in cache. The first pair writes the sums (no zeroing, no load).
+Measured at 7 x 24 MP, single thread: 0.27 s of CPU, against 0.38 s for one bracket per
+look-up (``benchmarks/speed``). Deeper codes would need ``levels**2`` entries and take
+the general path (one look-up per code, two brackets per pass over the row).
+
+Sums are float32: each look-up adds one float32 rounding, so ``ln E`` is within a few
+float32 ulps of the float64 result (the output is float32 anyway).
 
 A channel with no weight left takes the estimate of the longest bracket it was not
 dropped from, or the shortest bracket's if it is saturated even there (a rare path that
@@ -28,10 +43,17 @@ whole row is saturated; that bracket and every longer one would be reset away, s
 are never read (the sky rows of an outdoor scene in the long exposures, say;
 ``benchmarks/speed`` measures it). Stopping per 32-pixel segment instead would skip
 more on the benchmark's scene (5.9 of 7 brackets read) but the short loops cost more
-than they save (1.45x slower in all).
+than they save (1.45x slower in all). With pair tables, a stop after an odd number of
+brackets pairs the rest differently from the full row, which changes the float32
+rounding of the sums (within the few ulps above), not the result; keeping the full row's
+pairs would read a saturated bracket more and halve what the stop saves on the
+benchmark's sky scene.
 
-The log-domain result is left as ``ln E`` (float32, clamped to float32's range) for
-:func:`exp_in_place`, NumPy's SIMD ``exp`` run on every core.
+**Exp in the kernel.** In the log domain each row's ``ln E`` (clamped to float32's range)
+is exponentiated while the row is still in cache, by a polynomial ``exp`` (Cephes'
+``expf``: ``2^k e^r``, ``|r| <= ln 2 / 2``, 1.3 ulp at most) that the compiler
+vectorises, where ``math.exp`` would be a scalar library call per value. It replaces a
+separate NumPy ``exp`` pass over the whole image.
 
 The kernel merges a band of rows per call, so that brackets staged in a temporary file
 (:mod:`hdrio.io.staging`) are read, and released, a band at a time.
@@ -48,8 +70,6 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hdrio.parallel import on_threads
-
 MAX_BRACKETS = 64
 """Brackets one merge takes (more is never a real bracket set)."""
 
@@ -62,9 +82,28 @@ LOG_FLOAT32_MAX = math.log(FLOAT32_MAX) - 1e-3
 ROWS_PER_TASK = 16
 """Rows per parallel task: small enough for the threads to share any band evenly."""
 
+PAIR_LEVELS = 256
+"""Pair tables are built for codes of at most this many levels (8-bit)."""
+
+# float32 constants, so that numba keeps the row loops in float32 (twice the SIMD lanes).
+_TINY = np.float32(FLOAT32_TINY)
+_MAX = np.float32(FLOAT32_MAX)
+_LOG_TINY = np.float32(LOG_FLOAT32_TINY)
+_LOG_MAX = np.float32(LOG_FLOAT32_MAX)
+# Cephes expf: ln 2 split in two so that k ln 2 is exact, and e^r's minimax polynomial.
+_LOG2E = np.float32(1.44269504088896341)
+_LN2_HIGH = np.float32(0.693359375)
+_LN2_LOW = np.float32(-2.12194440e-4)
+_EXP_POLYNOMIAL = tuple(np.float32(c) for c in (
+    1.9875691500e-4, 1.3981999507e-3, 8.3334519073e-3, 4.1665795894e-2, 1.6666665459e-1,
+    5.0000001201e-1))
+
+_KERNEL = dict(cache=True, nogil=True, fastmath={"contract"}, error_model="numpy")
+"""Fused multiply-adds allowed (they round once, not twice); division by 0 gives inf or
+NaN instead of raising (the fallback replaces those values)."""
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def _saturated_everywhere(row, code_max):  # pragma: no cover - compiled
     for i in range(row.size):
         if row[i] != code_max:
@@ -72,80 +111,201 @@ def _saturated_everywhere(row, code_max):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, nogil=True)
-def _accumulate(row, weighted, weights, code_max, per_channel, channels, numerator,
-                denominator):  # pragma: no cover - compiled
-    """``sum = (sum + table[z]) * (z != Z_max)`` over one bracket's row."""
+@njit(**_KERNEL)
+def _reset_add(total, keep, term):  # pragma: no cover - compiled
+    """``total * keep + term`` on both parts (``keep`` 0 or 1), as fused multiply-adds."""
+    return complex(total.real * keep + term.real, total.imag * keep + term.imag)
+
+
+@njit(**_KERNEL)
+def _add_reset(total, term, keep):  # pragma: no cover - compiled
+    """``(total + term) * keep`` on both parts (the tutorial's per-pixel policy)."""
+    return complex((total.real + term.real) * keep, (total.imag + term.imag) * keep)
+
+
+@njit(**_KERNEL)
+def _accumulate(row, terms, code_max, per_channel, channels, sums):  # pragma: no cover
+    """``sum = (sum + term[z]) * (z != Z_max)`` over one bracket's row."""
     if channels == 3:
-        a0, a1, a2 = weighted[0], weighted[1], weighted[2]
-        b0, b1, b2 = weights[0], weights[1], weights[2]
+        t0, t1, t2 = terms[0], terms[1], terms[2]
         if per_channel:
-            # The tables are 0 at Z_max, so "(sum + t) * r" is "sum * r + t": one fused
+            # The terms are 0 at Z_max, so "(sum + t) * r" is "sum * r + t": one fused
             # multiply-add (1.25x faster than the product form).
             for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
                 i = 3 * x
                 z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-                r0 = 1.0 * (z0 != code_max)
-                r1 = 1.0 * (z1 != code_max)
-                r2 = 1.0 * (z2 != code_max)
-                numerator[i] = numerator[i] * r0 + a0[z0]
-                denominator[i] = denominator[i] * r0 + b0[z0]
-                numerator[i + 1] = numerator[i + 1] * r1 + a1[z1]
-                denominator[i + 1] = denominator[i + 1] * r1 + b1[z1]
-                numerator[i + 2] = numerator[i + 2] * r2 + a2[z2]
-                denominator[i + 2] = denominator[i + 2] * r2 + b2[z2]
+                sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
+                sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
+                sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
             return
         for x in range(row.size // 3):
             i = 3 * x
             z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-            r = 1.0 * ((z0 != code_max) & (z1 != code_max) & (z2 != code_max))
-            numerator[i] = (numerator[i] + a0[z0]) * r
-            denominator[i] = (denominator[i] + b0[z0]) * r
-            numerator[i + 1] = (numerator[i + 1] + a1[z1]) * r
-            denominator[i + 1] = (denominator[i + 1] + b1[z1]) * r
-            numerator[i + 2] = (numerator[i + 2] + a2[z2]) * r
-            denominator[i + 2] = (denominator[i + 2] + b2[z2]) * r
+            r = np.float32((z0 != code_max) & (z1 != code_max) & (z2 != code_max))
+            sums[i] = _add_reset(sums[i], t0[z0], r)
+            sums[i + 1] = _add_reset(sums[i + 1], t1[z1], r)
+            sums[i + 2] = _add_reset(sums[i + 2], t2[z2], r)
         return
     for x in range(row.size // channels):
-        keep = 1.0
+        keep = np.float32(1.0)
         if not per_channel:
             for c in range(channels):
-                keep *= row[x * channels + c] != code_max
+                keep = keep * np.float32(row[x * channels + c] != code_max)
         for c in range(channels):
             i = x * channels + c
             z = row[i]
-            r = keep * (z != code_max)
-            numerator[i] = (numerator[i] + weighted[c, z]) * r
-            denominator[i] = (denominator[i] + weights[c, z]) * r
+            sums[i] = _add_reset(sums[i], terms[c, z], keep * np.float32(z != code_max))
 
 
-@njit(cache=True, nogil=True)
-def _accumulate_pair(longer, shorter, weighted_longer, weighted_shorter, weights, code_max,
-                     numerator, denominator):  # pragma: no cover - compiled
+@njit(**_KERNEL)
+def _accumulate_two(longer, shorter, terms_longer, terms_shorter, code_max,
+                    sums):  # pragma: no cover - compiled
     """Two brackets at once, per-channel policy, three channels: half the loads and
     stores of the sums that two :func:`_accumulate` calls make (1.13x faster)."""
-    a0, a1, a2 = weighted_longer[0], weighted_longer[1], weighted_longer[2]
-    c0, c1, c2 = weighted_shorter[0], weighted_shorter[1], weighted_shorter[2]
-    b0, b1, b2 = weights[0], weights[1], weights[2]
+    a0, a1, a2 = terms_longer[0], terms_longer[1], terms_longer[2]
+    b0, b1, b2 = terms_shorter[0], terms_shorter[1], terms_shorter[2]
     for x in range(longer.size // 3):
         i = 3 * x
         z0, z1, z2 = longer[i], longer[i + 1], longer[i + 2]
         y0, y1, y2 = shorter[i], shorter[i + 1], shorter[i + 2]
-        r0 = 1.0 * (z0 != code_max)
-        r1 = 1.0 * (z1 != code_max)
-        r2 = 1.0 * (z2 != code_max)
-        s0 = 1.0 * (y0 != code_max)
-        s1 = 1.0 * (y1 != code_max)
-        s2 = 1.0 * (y2 != code_max)
-        numerator[i] = (numerator[i] * r0 + a0[z0]) * s0 + c0[y0]
-        denominator[i] = (denominator[i] * r0 + b0[z0]) * s0 + b0[y0]
-        numerator[i + 1] = (numerator[i + 1] * r1 + a1[z1]) * s1 + c1[y1]
-        denominator[i + 1] = (denominator[i + 1] * r1 + b1[z1]) * s1 + b1[y1]
-        numerator[i + 2] = (numerator[i + 2] * r2 + a2[z2]) * s2 + c2[y2]
-        denominator[i + 2] = (denominator[i + 2] * r2 + b2[z2]) * s2 + b2[y2]
+        sums[i] = _reset_add(_reset_add(sums[i], np.float32(z0 != code_max), a0[z0]),
+                             np.float32(y0 != code_max), b0[y0])
+        sums[i + 1] = _reset_add(
+            _reset_add(sums[i + 1], np.float32(z1 != code_max), a1[z1]),
+            np.float32(y1 != code_max), b1[y1])
+        sums[i + 2] = _reset_add(
+            _reset_add(sums[i + 2], np.float32(z2 != code_max), a2[z2]),
+            np.float32(y2 != code_max), b2[y2])
 
 
-@njit(cache=True, nogil=True)
+@njit(parallel=True, cache=True, nogil=True)
+def pair_tables(terms, code_max):  # pragma: no cover - compiled
+    """The pair tables of three-channel codes below :data:`PAIR_LEVELS` levels, complex64
+    ``(P, 3, 256 * 256)``: entry ``z * 256 + y`` of table ``j`` holds the terms of bracket
+    ``j`` at code ``z`` and bracket ``j - 1`` at code ``y``, ``t_j(z) (y != Z_max) +
+    t_{j-1}(y)``. Table 0 pairs the shortest bracket with a row of code 0 (no term of
+    its own).
+
+    ``terms`` are :func:`merge_kernel`'s, complex128 here: the sums are formed in float64,
+    then rounded once.
+    """
+    count, channels, levels = terms.shape
+    tables = np.zeros((count, channels, PAIR_LEVELS * PAIR_LEVELS), np.complex64)
+    for task in prange(count * channels):
+        j, c = task // channels, task % channels
+        table = tables[j, c]
+        for z in range(levels):
+            for y in range(levels if j > 0 else 1):
+                term = terms[j, c, z] * (1.0 if y != code_max else 0.0)
+                if j > 0:
+                    term += terms[j - 1, c, y]
+                table[z * PAIR_LEVELS + y] = term
+    return tables
+
+
+@njit(**_KERNEL)
+def _start_pair(longer, shorter, table, sums):  # pragma: no cover - compiled
+    """The sums of the longest pair of a row: written, not added (no zeroing, no load)."""
+    t0, t1, t2 = table[0], table[1], table[2]
+    for x in range(longer.size // 3):
+        i = 3 * x
+        sums[i] = t0[np.int32(longer[i]) * PAIR_LEVELS + np.int32(shorter[i])]
+        sums[i + 1] = t1[np.int32(longer[i + 1]) * PAIR_LEVELS + np.int32(shorter[i + 1])]
+        sums[i + 2] = t2[np.int32(longer[i + 2]) * PAIR_LEVELS + np.int32(shorter[i + 2])]
+
+
+@njit(**_KERNEL)
+def _add_pair(longer, shorter, table, code_max, sums):  # pragma: no cover - compiled
+    """``sum = sum * (z != Z_max) (y != Z_max) + T[z, y]`` for one pair of brackets."""
+    t0, t1, t2 = table[0], table[1], table[2]
+    for x in range(longer.size // 3):
+        i = 3 * x
+        z0, z1, z2 = np.int32(longer[i]), np.int32(longer[i + 1]), np.int32(longer[i + 2])
+        y0, y1, y2 = (np.int32(shorter[i]), np.int32(shorter[i + 1]),
+                      np.int32(shorter[i + 2]))
+        sums[i] = _reset_add(sums[i], np.float32((z0 != code_max) & (y0 != code_max)),
+                             t0[z0 * PAIR_LEVELS + y0])
+        sums[i + 1] = _reset_add(sums[i + 1],
+                                 np.float32((z1 != code_max) & (y1 != code_max)),
+                                 t1[z1 * PAIR_LEVELS + y1])
+        sums[i + 2] = _reset_add(sums[i + 2],
+                                 np.float32((z2 != code_max) & (y2 != code_max)),
+                                 t2[z2 * PAIR_LEVELS + y2])
+
+
+@njit(**_KERNEL)
+def _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max,
+                         sums):  # pragma: no cover - compiled
+    """Brackets ``stop - 1 .. 0`` of row ``y``, two at a time, longest first."""
+    j = stop - 1
+    _start_pair(codes[j, y], codes[j - 1, y] if j >= 1 else zeros, pairs[j], sums)
+    j -= 2
+    while j >= 0:
+        _add_pair(codes[j, y], codes[j - 1, y] if j >= 1 else zeros, pairs[j], code_max,
+                  sums)
+        j -= 2
+
+
+@njit(**_KERNEL)
+def _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel,
+                            sums):  # pragma: no cover - compiled
+    """Brackets ``stop - 1 .. 0`` of row ``y``, one look-up per code, longest first."""
+    channels = terms.shape[1]
+    sums[:] = 0.0
+    j = stop - 1
+    if per_channel and channels == 3:
+        while j >= 1:
+            _accumulate_two(codes[j, y], codes[j - 1, y], terms[j], terms[j - 1], code_max,
+                            sums)
+            j -= 2
+    while j >= 0:
+        _accumulate(codes[j, y], terms[j], code_max, per_channel, channels, sums)
+        j -= 1
+
+
+@njit(**_KERNEL)
+def _exp_row(values, scale):  # pragma: no cover - compiled
+    """``values = exp(values)`` for ``values`` within ``[LOG_FLOAT32_TINY,
+    LOG_FLOAT32_MAX]``: ``e^v = 2^k e^r`` with ``k = round(v / ln 2)``. ``2^k`` is built
+    from its bits in the int32 ``scale`` (as ``2^min(k, 127)``, times 2 for k = 128), so
+    both loops vectorise."""
+    powers = scale.view(np.float32)
+    p0, p1, p2, p3, p4, p5 = _EXP_POLYNOMIAL
+    for i in range(values.size):
+        v = values[i]
+        k = np.floor(v * _LOG2E + np.float32(0.5))
+        r = v - k * _LN2_HIGH - k * _LN2_LOW
+        p = ((((p0 * r + p1) * r + p2) * r + p3) * r + p4) * r + p5
+        e = p * r * r + r + np.float32(1.0)
+        whole = np.int32(k)
+        capped = min(whole, np.int32(127))
+        values[i] = e * np.float32(1 + whole - capped)
+        scale[i] = (capped + np.int32(127)) << np.int32(23)
+    for i in range(values.size):
+        values[i] *= powers[i]
+
+
+@njit(**_KERNEL)
+def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
+    """``row = numerator / denominator`` (the sums' two parts), clamped to float32's
+    range (the range of ``ln E``, then exponentiated, in the log domain). True if a
+    denominator is 0."""
+    empty = False
+    if log_domain:
+        for i in range(row.size):
+            d = sums[i].imag
+            empty |= d <= 0
+            row[i] = min(max(sums[i].real / d, _LOG_TINY), _LOG_MAX)
+        _exp_row(row, scale)
+        return empty
+    for i in range(row.size):
+        d = sums[i].imag
+        empty |= d <= 0
+        row[i] = min(max(sums[i].real / d, _TINY), _MAX)
+    return empty
+
+
+@njit(**_KERNEL)
 def _fallback(codes, y, x, c, channels, code_max, per_channel,
               estimates):  # pragma: no cover - compiled
     """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
@@ -164,16 +324,18 @@ def _fallback(codes, y, x, c, channels, code_max, per_channel,
     return estimates[j, c, codes[j, y][x * channels + c]]
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cover - compiled
     """Pixels with a channel saturated in ``shortest``; pixels at 0 in all of ``longest``."""
     clipped = 0
     black = 0
     if channels == 3:
-        for i in range(0, shortest.size, 3):
-            clipped += ((shortest[i] == code_max) | (shortest[i + 1] == code_max)
-                        | (shortest[i + 2] == code_max))
-            black += (longest[i] == 0) & (longest[i + 1] == 0) & (longest[i + 2] == 0)
+        # Written so that it vectorises (8x faster than a stepped range of booleans).
+        for x in range(shortest.size // 3):
+            i = 3 * x
+            clipped += np.int32((shortest[i] == code_max) | (shortest[i + 1] == code_max)
+                                | (shortest[i + 2] == code_max))
+            black += np.int32((longest[i] | longest[i + 1] | longest[i + 2]) == 0)
         return clipped, black
     for x in range(shortest.size // channels):
         any_saturated = False
@@ -186,31 +348,32 @@ def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cov
     return clipped, black
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def merge_kernel(codes, top, bottom, weighted, estimates, weights, code_max,
-                 per_channel, log_domain, early_stop, out, clipped_rows, black_rows,
+@njit(parallel=True, **_KERNEL)
+def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_channel,
+                 log_domain, early_stop, out, clipped_rows, black_rows,
                  skipped_rows):  # pragma: no cover - compiled
     """Merge rows ``top .. bottom`` of the brackets into ``out`` ``(H, W * C)`` float32.
 
-    ``codes`` is ``(P, H, W * C)``, shortest exposure first.
-    Tables, float64: ``weights[c, z]``, ``estimates[j, c, z]`` and
-    ``weighted[j, c, z] = weights[c, z] * estimates[j, c, z]``, both weight tables 0 at
-    ``z = code_max`` (a saturated observation never counts). Writes ``ln E`` in the
-    log domain (see :func:`exp_in_place`), ``E`` in the linear domain. ``early_stop``
-    false reads every bracket of every row (the same result). Per row, for the
-    statistics: ``clipped_rows`` (pixels with a channel saturated in the shortest
-    bracket), ``black_rows`` (pixels at code 0 in every channel of the longest) and
-    ``skipped_rows`` (pixel-brackets the early stop never read).
+    ``codes`` is ``(P, H, W * C)``, shortest exposure first. ``terms[j, c, z]`` (complex64)
+    is ``w(z) x_j(z) + i w(z)``, the numerator's and the denominator's term, both 0 at
+    ``z = code_max`` (a saturated observation never counts); ``estimates[j, c, z]``
+    (float64) is ``x_j(z)`` for the fallback. ``pairs`` is :func:`pair_tables` of the
+    terms (the per-channel policy with three channels of 8-bit codes), or empty for the
+    general path. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
+    reads every bracket of every row (the same result, to float32 rounding). Per row,
+    for the statistics: ``clipped_rows`` (pixels with a channel saturated in the
+    shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
+    and ``skipped_rows`` (pixel-brackets the early stop never read).
     """
     count = codes.shape[0]
-    channels = weights.shape[0]
+    channels = terms.shape[1]
     n = out.shape[1]
-    low = LOG_FLOAT32_TINY if log_domain else FLOAT32_TINY
-    high = LOG_FLOAT32_MAX if log_domain else FLOAT32_MAX
+    by_pairs = pairs.shape[0] == count
     tasks = (bottom - top + ROWS_PER_TASK - 1) // ROWS_PER_TASK
     for task in prange(tasks):
-        numerator = np.empty(n)
-        denominator = np.empty(n)
+        sums = np.empty(n, np.complex64)  # numerator + i denominator
+        scale = np.empty(n, np.int32)
+        zeros = np.zeros(n, codes.dtype)
         for y in range(top + task * ROWS_PER_TASK,
                        min(bottom, top + (task + 1) * ROWS_PER_TASK)):
             # Early stop: the first bracket saturated across the whole row, and every
@@ -220,54 +383,20 @@ def merge_kernel(codes, top, bottom, weighted, estimates, weights, code_max,
                 if _saturated_everywhere(codes[j, y], code_max):
                     stop = j
                     break
-            numerator[:] = 0.0
-            denominator[:] = 0.0
-            j = stop - 1
-            if per_channel and channels == 3:
-                while j >= 1:
-                    _accumulate_pair(codes[j, y], codes[j - 1, y], weighted[j],
-                                     weighted[j - 1], weights, code_max, numerator,
-                                     denominator)
-                    j -= 2
-            while j >= 0:
-                _accumulate(codes[j, y], weighted[j], weights, code_max, per_channel,
-                            channels, numerator, denominator)
-                j -= 1
+            if by_pairs:
+                _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max, sums)
+            else:
+                _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel, sums)
             row = out[y]
-            empty = False
-            for i in range(n):
-                d = denominator[i]
-                empty |= d <= 0.0
-                value = numerator[i] / d if d > 0.0 else 0.0
-                row[i] = min(max(value, low), high)
-            if empty:
+            if _finish(sums, row, log_domain, scale):
                 for i in range(n):
-                    if denominator[i] <= 0.0:
+                    if sums[i].imag <= 0.0:
                         value = _fallback(codes, y, i // channels, i % channels,
-                                          channels, code_max, per_channel,
-                                          estimates)
-                        row[i] = min(max(value, low), high)
+                                          channels, code_max, per_channel, estimates)
+                        if log_domain:
+                            value = math.exp(min(max(value, LOG_FLOAT32_TINY),
+                                                 LOG_FLOAT32_MAX))
+                        row[i] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
             skipped_rows[y] = (count - stop) * (n // channels)
             clipped_rows[y], black_rows[y] = _clipped_and_black(
-                codes[0, y],
-                codes[count - 1, y], code_max, channels)
-
-
-EXP_BLOCK = 1 << 20
-"""Values per task of :func:`exp_in_place` (4 MB of float32)."""
-
-
-def exp_in_place(values: np.ndarray) -> None:
-    """``values = exp(values)`` for float32 ``values``, in blocks on every core.
-
-    NumPy's float32 ``exp`` is vectorised (SIMD) and releases the GIL, so blocks run at
-    once on :func:`hdrio.parallel.on_threads`; numba's would be a scalar libm call per
-    value.
-    """
-    flat = values.reshape(-1)
-
-    def blocks(first: int, last: int) -> None:
-        part = flat[first * EXP_BLOCK: last * EXP_BLOCK]
-        np.exp(part, out=part)
-
-    on_threads(blocks, -(-flat.size // EXP_BLOCK))
+                codes[0, y], codes[count - 1, y], code_max, channels)
