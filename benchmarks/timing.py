@@ -43,3 +43,25 @@ def measure_call(function: Callable[[], Any], repeats: int = 3, warmup: int = 0)
         if memory.peak_mb is not None:
             peaks.append(memory.peak_mb)
     return Timing(times, max(peaks) if peaks else None, result)
+
+
+def measure_alternately(calls: dict[str, Callable[[], Any]], repeats: int = 3,
+                        warmup: int = 1) -> dict[str, Timing]:
+    """Time several calls in turn, one of each per repeat (after ``warmup`` untimed
+    rounds), so that a drift in the machine's speed falls on all of them alike. Each
+    call is timed as :func:`measure_call` times it; its :class:`Timing` keeps every
+    repeat's time, the largest peak and the last result."""
+    for _ in range(warmup):
+        for call in calls.values():
+            call()
+    timings = {name: Timing([], None) for name in calls}
+    for _ in range(max(1, repeats)):
+        for name, call in calls.items():
+            timing = timings[name]
+            timing.result = None  # free the previous result before the next call
+            once = measure_call(call, 1)
+            timing.times += once.times
+            timing.result = once.result
+            if once.peak_mb is not None:
+                timing.peak_mb = max(timing.peak_mb or 0.0, once.peak_mb)
+    return timings

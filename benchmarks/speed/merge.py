@@ -10,7 +10,7 @@ import numpy as np
 
 from benchmarks.speed.floor import parallel_copy
 from benchmarks.speed.scene import true_response
-from benchmarks.timing import measure_call
+from benchmarks.timing import measure_alternately, measure_call
 from hdrio.merge.debevec1997 import merge_brackets
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import radiance_error, well_exposed
@@ -21,19 +21,24 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
     mask = well_exposed(stack.codes, stack.code_max)
     rows: list[dict] = []
 
+    # The floor and both merges in turn, so that a drift in the machine's speed (it is
+    # shared) falls on all three alike. The floor copies into a buffer it reuses; the
+    # merges allocate their output each call, as a caller's merge does.
     destination = np.empty_like(stack.codes)
-    floor = measure_call(lambda: parallel_copy(stack.codes, destination), repeats, warmup=1)
+    timings = measure_alternately({
+        "floor": lambda: parallel_copy(stack.codes, destination),
+        "log": lambda: merge_brackets(stack, response, domain="log")[0],
+        "linear": lambda: merge_brackets(stack, response, domain="linear")[0],
+    }, repeats)
     destination = None
     rows.append({"row": "merge", "method": "floor (copy of the codes, all cores)",
-                 "seconds": floor.seconds, "peak_mb": floor.peak_mb})
-
+                 "seconds": timings["floor"].seconds, "peak_mb": timings["floor"].peak_mb})
     for domain in ("log", "linear"):
-        timing = measure_call(lambda d=domain: merge_brackets(stack, response, domain=d)[0],
-                              repeats, warmup=1)
+        timing = timings[domain]
+        error = radiance_error(timing.result, radiance, mask)
         rows.append({"row": "merge", "method": f"hdrio merge ({domain})",
                      "seconds": timing.seconds, "peak_mb": timing.peak_mb,
-                     "median_error": radiance_error(timing.result, radiance, mask)["median"],
-                     "p99_error": radiance_error(timing.result, radiance, mask)["p99"]})
+                     "median_error": error["median"], "p99_error": error["p99"]})
         timing.result = None
 
     try:
@@ -48,8 +53,8 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
     merge = cv2.createMergeDebevec()
     timing = measure_call(lambda: merge.process(images, times, cv_response), repeats,
                           warmup=1)
+    error = radiance_error(timing.result, radiance, mask)
     rows.append({"row": "merge", "method": "OpenCV MergeDebevec", "seconds": timing.seconds,
-                 "peak_mb": timing.peak_mb,
-                 "median_error": radiance_error(timing.result, radiance, mask)["median"],
-                 "p99_error": radiance_error(timing.result, radiance, mask)["p99"]})
+                 "peak_mb": timing.peak_mb, "median_error": error["median"],
+                 "p99_error": error["p99"]})
     return rows

@@ -9,7 +9,6 @@ reading or the merge; the solve or the merge alone where that is all it touches 
 
 from __future__ import annotations
 
-import statistics
 import tempfile
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from benchmarks.speed.scene import (
     sky_scene,
     true_response,
 )
-from benchmarks.timing import measure_call
+from benchmarks.timing import measure_alternately
 from hdrio.merge.debevec1997 import merge_brackets
 from hdrio.pipeline import MergeOptions, merge_files
 from hdrio.response import response_Debevec1997
@@ -32,16 +31,10 @@ from hdrio.response.stored import read_response
 def _pair(rows: list[dict], name: str, scene: str, on, off, repeats: int) -> None:
     """Time ``on`` and ``off`` alternately (one of each per repeat, after one warm-up
     each), so a drift in the machine's speed falls on both alike; medians."""
-    timings = {"on": [], "off": []}
-    calls = {"on": on, "off": off}
-    for state in calls:
-        calls[state]()
-    for _ in range(max(1, repeats)):
-        for state, call in calls.items():
-            timings[state].append(measure_call(call, 1).seconds)
-    for state, times in timings.items():
+    timings = measure_alternately({"on": on, "off": off}, repeats)
+    for state, timing in timings.items():
         rows.append({"row": "skips", "method": f"{name} {state}: {scene}", "skip": name,
-                     "state": state, "seconds": statistics.median(times)})
+                     "state": state, "seconds": timing.seconds})
 
 
 def _merge_files(paths, output, exposures, **options):
