@@ -84,7 +84,8 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
 
     ``saturation`` is ``"channel"`` (default: a saturated channel is dropped on its own)
     or ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel).
-    ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (same result).
+    ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
+    result to float32 rounding).
 
     Codes staged in a file (:mod:`hdrio.io.staging`) are merged a band of rows at a time,
     each band's pages given back once merged.
