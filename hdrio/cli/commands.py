@@ -10,7 +10,8 @@ import numpy as np
 from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
-from hdrio.merge.debevec1997 import MERGE_METHODS, SATURATION_POLICIES
+from hdrio.merge.debevec1997 import SATURATION_POLICIES
+from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.weighting import WEIGHTING_METHODS
 from hdrio.pipeline import MergeOptions, MergeResult, merge_files
 from hdrio.response import RESPONSE_METHODS, SAMPLING_METHODS
@@ -45,9 +46,10 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--weighting", default=defaults.weighting,
                        help=f"weighting function: {', '.join(WEIGHTING_METHODS.names())} "
                             "(default %(default)s)")
-    group.add_argument("--merge", default=defaults.merge, metavar="DOMAIN",
-                       help=f"merge domain: {', '.join(MERGE_METHODS.names())} "
-                            "(default %(default)s)")
+    group.add_argument("--merge", default=defaults.merge, metavar="METHOD",
+                       help=f"merge estimator: {', '.join(MERGE_METHODS.names())} "
+                            "(default %(default)s: weights from the stack's noise model; "
+                            "'log' is the tutorial's)")
     group.add_argument("--saturation", default=defaults.saturation,
                        choices=SATURATION_POLICIES,
                        help="a code at the top of the range drops that channel ('channel') "
@@ -60,6 +62,9 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--response-from", metavar="EXR", default=None,
                        help="use the camera response saved in an EXR written by hdrio "
                             "instead of solving (skips the solve)")
+    group.add_argument("--uncertainty", action="store_true",
+                       help="also write each pixel's predicted relative standard deviation "
+                            "(from the noise model) as the EXR layer 'uncertainty'")
     group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
                        choices=[*SKIPS, "all"],
                        help="turn off one of the work skips (repeatable): "
@@ -74,6 +79,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
         seed=args.seed, saturation=args.saturation, response_from=args.response_from,
+        uncertainty=args.uncertainty,
         no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
         **colour_fields(args),
     )
@@ -161,7 +167,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
-        f"merge:     {result.options.merge} domain, {times['merge']:.2f} s; clipped in every "
+        f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
