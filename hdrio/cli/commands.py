@@ -234,7 +234,7 @@ def add_demo(sub) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from hdrio.demo import DEMO_EXPOSURES, write_demo_brackets
+    from hdrio.demo import DEMO_EXPOSURES, oracle_radiance, write_demo_brackets
     from hdrio.synthetic import radiance_error, well_exposed
 
     folder = Path(args.output_dir)
@@ -252,4 +252,13 @@ def run_demo(args: argparse.Namespace) -> int:
           f"{100 * mask.mean():.1f} % of pixels well exposed in some bracket: median "
           f"{100 * error['median']:.2f} %, p95 {100 * error['p95']:.2f} %, "
           f"p99 {100 * error['p99']:.2f} %")
+    bound = radiance_error(oracle_radiance(result.stack), truth, mask)
+    print(f"bound:     the noise-aware oracle (true curve, true noise, inverse-variance "
+          f"weights): median {100 * bound['median']:.2f} %, p95 {100 * bound['p95']:.2f} %, "
+          f"p99 {100 * bound['p99']:.2f} %")
+    ratio = max(error["median"] / bound["median"], error["p99"] / bound["p99"])
+    verdict = ("within 10 % of the bound" if ratio <= 1.1 else
+               f"{ratio:.2f}x the bound (a calibrated curve or --merge inverse-variance "
+               "closes the gap)")
+    print(f"verdict:   {verdict}")
     return 0
