@@ -132,7 +132,6 @@ def _merge_domain(token: str) -> bool:
 
 def _merge_options(values: list[str]) -> str:
     from hdrio.merge import MERGE_METHODS
-
     from hdrio.pipeline import MergeOptions
 
     return MERGE_METHODS.canonical(values[0]) if values else MergeOptions().merge

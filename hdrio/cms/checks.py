@@ -218,7 +218,8 @@ def format_report(report: CheckReport) -> str:
                      f"(patch {int(dE.argmax()) + 1})")
     if report.uncertainty is not None:
         u = report.uncertainty
-        lines.append(f"  uncertainty:  median {100 * u['median']:.2f} %, 99 % {100 * u['p99']:.1f} %"
-                     f" (relative sigma); {100 * u['above_10pct']:.2f} % of values above 10 %")
+        lines.append(f"  uncertainty:  median {100 * u['median']:.2f} %, 99 % "
+                     f"{100 * u['p99']:.1f} % (relative sigma); "
+                     f"{100 * u['above_10pct']:.2f} % of values above 10 %")
     lines += [f"  note:         {note}" for note in report.notes]
     return "\n".join(lines)
