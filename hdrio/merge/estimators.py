@@ -52,6 +52,19 @@ NOISE_AWARE = ("inverse-variance", "Poisson")
 """Estimators whose weights read the noise model."""
 
 
+def supported_range(response: CameraResponse) -> np.ndarray:
+    """``(levels, C)``: codes from the first to the last the solve supported, per channel.
+
+    Codes inside that range that no sample fell on (most of them at 16 bits, where the
+    solve sees 1024 levels) have ``g`` interpolated between supported neighbours: as good
+    as their neighbours, so they keep their weight.
+    """
+    supported = np.asarray(response.supported, dtype=bool)
+    after_first = np.logical_or.accumulate(supported, axis=0)
+    before_last = np.logical_or.accumulate(supported[::-1], axis=0)[::-1]
+    return after_first & before_last
+
+
 def weights_inverse_variance(response: CameraResponse, exposures, noise: NoiseModel
                              ) -> np.ndarray:
     """``w_j(z) = 1 / var(x_j | z)`` on usable codes, else 0: ``(P, C, levels)``.
@@ -59,14 +72,14 @@ def weights_inverse_variance(response: CameraResponse, exposures, noise: NoiseMo
     Units: 1 / relative radiance squared (only ratios matter).
     """
     variance = observation_variance(response, exposures, noise)
-    usable = (usable_codes(response, noise) & response.supported).T[None]
+    usable = (usable_codes(response, noise) & supported_range(response)).T[None]
     return np.where(usable, 1.0 / variance, 0.0)
 
 
 def weights_Poisson(response: CameraResponse, exposures, noise: NoiseModel) -> np.ndarray:
     """``w_j(z) = dt_j`` on usable codes, else 0: ``(P, C, levels)`` (seconds)."""
     exposures = np.asarray(exposures, dtype=np.float64)
-    usable = (usable_codes(response, noise) & response.supported).T[None]
+    usable = (usable_codes(response, noise) & supported_range(response)).T[None]
     return np.where(usable, exposures[:, None, None], 0.0)
 
 
