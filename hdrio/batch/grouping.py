@@ -143,14 +143,16 @@ def group_frames(frames: Iterable[Frame], max_gap_s: float = DEFAULT_MAX_GAP_S,
     -------
     list of BracketSet
         In capture order: ordered by series, then capture time (when every frame has
-        one), sequence number and name.
+        one), sequence number and name (a series named by exposure: shortest first).
     """
     frames = list(frames)
     timed = all(frame.captured is not None for frame in frames)
 
     def order(frame: Frame):
         sequence = frame.sequence if frame.sequence is not None else -1
-        return (frame.series, frame.captured if timed else 0, sequence, frame.path.name)
+        shortest_first = (frame.exposure or 0.0) if frame.series else 0.0
+        return (frame.series, frame.captured if timed else 0, sequence, shortest_first,
+                frame.path.name)
 
     sets: list[list[Frame]] = []
     for frame in sorted(frames, key=order):

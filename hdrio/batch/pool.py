@@ -121,7 +121,8 @@ def _start_worker(parent_pid: int, threads: int) -> None:
 
 def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
               on_result: OnResult | None = None) -> list[SetResult]:
-    """Run ``tasks`` in a pool of ``workers`` processes on this machine.
+    """Run ``tasks`` in a pool of ``workers`` processes on this machine (one: serially,
+    in this process).
 
     ``on_result(result, done, total)`` is called in this process as each set finishes.
     Results are returned in the order the sets finished.
@@ -129,9 +130,15 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
     if not tasks:
         return []
     workers = max(1, min(workers, len(tasks)))
+    results = []
+    if workers == 1:  # serial: in this process, without a pool's start-up (seconds)
+        for task in tasks:
+            results.append(run_set(work, task))
+            if on_result is not None:
+                on_result(results[-1], len(results), len(tasks))
+        return results
     # spawn: OpenImageIO and numba keep thread pools that a fork would copy mid-flight.
     context = multiprocessing.get_context("spawn")
-    results = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=context,
                              initializer=_start_worker,
                              initargs=(os.getpid(), worker_threads(workers))) as pool:
