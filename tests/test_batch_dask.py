@@ -73,7 +73,7 @@ def test_cli_on_the_cluster_writes_what_the_serial_run_writes(shoot, tmp_path, c
     assert main([str(shoot), "--dask", address, "--group", "--merge",
                  "-o", f"{farm}/{{first_stem}}.exr"]) == 0, capsys.readouterr().err
     out = capsys.readouterr().out
-    assert f"{SETS} bracket sets; {SETS} to merge" in out and out.count("(merged)") == 2 * SETS
+    assert f"{SETS} bracket sets; {SETS} to merge" in out and out.count("(merged in ") == 2 * SETS
     a, b = _pixels(serial), _pixels(farm)
     assert len(a) == SETS and a.keys() == b.keys()
     for name in a:  # same code on the same files: bit for bit

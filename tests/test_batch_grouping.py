@@ -114,7 +114,7 @@ def test_sets_merge_in_parallel_and_a_second_run_does_nothing(shoot, tmp_path, c
     assert main(argv) == 0, capsys.readouterr().err
     stdout = capsys.readouterr().out
     assert "3 bracket sets; 3 to merge, 0 done, 0 skipped" in stdout
-    assert stdout.count("(merged)") == 3
+    assert stdout.count("(merged in ") == 3
     for numbers in NUMBERS:
         exr = out / f"IMG_{numbers[0]:04d}_hdr.exr"
         sources = OpenEXR.File(str(exr)).header()["hdrio:sourceFiles"]

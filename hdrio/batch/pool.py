@@ -50,7 +50,7 @@ class SetResult:
     seconds : float
         Wall time of the set, in seconds.
     peak_rss_mb : float
-        Peak resident memory of the worker process so far, in MiB (``ru_maxrss``).
+        Peak resident memory of the worker process so far, in MiB.
     """
 
     index: int
@@ -63,6 +63,15 @@ class SetResult:
 
 
 def _peak_rss_mb() -> float:
+    """This process's peak resident memory in MiB: ``VmHWM`` on Linux (``ru_maxrss``
+    carries a parent's peak over fork and exec), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
     try:
         import resource
     except ImportError:  # Windows

@@ -210,7 +210,8 @@ def run_groups(chain: Chain, step: Step, rest: list[Step], steps: list[Step]) ->
         task = next(t for t in todo if t.index == result.index)
         bar.bar(count, total, f"set {task.index}")
         chain.say(f"  set {task.index} [{count}/{total}]: {task.describe()} "
-                  f"({'merged' if result.ok else 'FAILED'})")
+                  f"({'merged' if result.ok else 'FAILED'} in {result.seconds:.1f} s, "
+                  f"worker peak {result.peak_rss_mb:.0f} MB)")
         for line in result.printed.strip().splitlines():
             chain.say(f"    {line}")
 
