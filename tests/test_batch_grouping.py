@@ -8,8 +8,8 @@ from pathlib import Path
 import OpenEXR
 import pytest
 
-from hdrio.cli import main
 from hdrio.batch.grouping import Frame, format_times, group_brackets, group_frames
+from hdrio.cli import main
 from tests.conftest import tutorial_name
 
 START = datetime.datetime(2026, 3, 1, 10, 0, 0)

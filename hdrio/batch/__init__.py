@@ -8,6 +8,7 @@ a set; the local pool), cluster (Dask, imported on use), shoot (all of it from P
 over it (:mod:`hdrio.cli.chain_batch`).
 """
 
+from hdrio.batch.fingerprint import set_fingerprint
 from hdrio.batch.grouping import (
     BracketSet,
     Frame,
@@ -17,10 +18,9 @@ from hdrio.batch.grouping import (
     list_images,
     read_frame,
 )
-from hdrio.batch.fingerprint import set_fingerprint
 from hdrio.batch.journal import is_done, record_done
-from hdrio.batch.plan import DONE, RUN, SetTask, parse_shard, plan_sets, sets_json
 from hdrio.batch.partial import clean_partials, stale_partials
+from hdrio.batch.plan import DONE, RUN, SetTask, parse_shard, plan_sets, sets_json
 from hdrio.batch.pool import SetResult, run_local, run_set
 from hdrio.batch.shoot import MergeSet, merge_shoot, run_sets
 

@@ -176,8 +176,11 @@ def load_operations() -> None:
 
     A new family of operations (colour management, say) adds its module here.
     """
+    import importlib
+
     from hdrio.cli import chain_colour, chain_ops, chain_output, chain_pictures  # noqa: F401
-    from hdrio.cli import chain_batch  # noqa: F401  (last: --group's settings end the help)
+
+    importlib.import_module("hdrio.cli.chain_batch")  # last: --group's settings end the help
 
 
 def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
