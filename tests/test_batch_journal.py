@@ -198,3 +198,11 @@ def test_a_batch_removes_stale_temporaries_in_its_output_folders(two_sets, tmp_p
     assert _run(two_sets, out) == 0
     assert not stale.exists()
     assert not list(out.glob(".*.partial*"))
+
+
+def test_hdrio_batch_imports_neither_the_cli_nor_dask():
+    code = ("import sys, hdrio.batch; print(sorted(m for m in sys.modules "
+            "if m.startswith(('hdrio.cli', 'distributed', 'dask'))))")
+    completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                               check=True)
+    assert completed.stdout.strip() == "[]"
