@@ -9,7 +9,9 @@ the ``hdrio`` command as a user runs it, one fresh process per row:
 * ``--dask local:1`` and ``--dask local:2``: a Dask ``LocalCluster`` of one and two;
 * ``hdrio merge`` of one set: the single-run memory budget.
 
-Throughput is sets per second of the whole command (start-up included); peak memory is
+Throughput is sets per minute of the whole command (start-up included), with the CPU
+time of the command's processes (user + system) and the cores that makes on average; a
+second worker can only help as far as one worker leaves a core idle. Peak memory is
 each worker's own ``VmHWM`` as the command reports it per set, and the command's largest
 process (``ru_maxrss`` of the children). The machine's load average is recorded before
 and after each row: on a shared machine the ratios are what to read.
@@ -41,8 +43,9 @@ start = time.perf_counter()
 code = subprocess.run(sys.argv[1:], capture_output=True, text=True)
 seconds = time.perf_counter() - start
 print(code.stdout + code.stderr)
-print("EXIT", code.returncode, "SECONDS", seconds,
-      "PEAK_KB", resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+print("EXIT", code.returncode, "SECONDS", seconds, "PEAK_KB", usage.ru_maxrss,
+      "CPU_S", usage.ru_utime + usage.ru_stime)
 """
 
 
@@ -75,6 +78,7 @@ def measure(command: list[str]) -> dict:
         raise RuntimeError(f"{' '.join(command)} failed:\n{output}")
     peaks = [int(p) for p in _PEAK.findall(output)]
     return {"seconds": float(last[3]), "process_peak_mb": int(last[5]) / 1024,
+            "cpu_seconds": float(last[7]),
             "worker_peak_mb": max(peaks) if peaks else None,
             "load_before": load_before, "load_after": os.getloadavg()[0]}
 
@@ -113,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
             row["sets_per_minute"] = 60 * sets / row["seconds"]
             rows.append(row)
             print(f"{name:42s} {row['seconds']:7.1f} s  {row['sets_per_minute']:5.2f} sets/min"
+                  f"  CPU {row['cpu_seconds']:6.1f} s ({row['cpu_seconds'] / row['seconds']:.2f}"
+                  " cores)"
                   f"  process peak {row['process_peak_mb']:6.0f} MB  worker peak "
                   f"{row['worker_peak_mb'] or float('nan'):6.0f} MB  load "
                   f"{row['load_before']:.1f} -> {row['load_after']:.1f}", flush=True)
