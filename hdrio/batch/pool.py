@@ -25,6 +25,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 from hdrio.batch.journal import record_done
+from hdrio.batch.partial import clean_partials
 from hdrio.batch.plan import SetTask
 
 Work = Callable[[SetTask], tuple[bool, str]]
@@ -81,8 +82,13 @@ def _peak_rss_mb() -> float:
 
 
 def run_set(work: Work, task: SetTask) -> SetResult:
-    """Run ``work(task)`` and record the set when it succeeded (in the worker)."""
+    """Run ``work(task)`` and record the set when it succeeded (in the worker).
+
+    First the stale temporary files of this host in the set's output folders are removed
+    (:mod:`hdrio.batch.partial`): on a cluster, each machine cleans its own.
+    """
     start = time.perf_counter()
+    clean_partials({path.parent for path in task.outputs})
     try:
         ok, printed = work(task)
     except Exception as error:  # one set's failure must not stop the others
