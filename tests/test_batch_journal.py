@@ -206,3 +206,10 @@ def test_hdrio_batch_imports_neither_the_cli_nor_dask():
     completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                check=True)
     assert completed.stdout.strip() == "[]"
+
+
+def test_sets_of_another_count_than_group_size_are_skipped_and_said_why(tmp_path):
+    three = BracketSet(tuple(Frame(Path(f"c{k}.png"), 4.0**k, None, k) for k in range(3)))
+    tasks = plan_sets([*_sets(2), three], lambda f: [tmp_path / f"{f['index']}.exr"], [],
+                      size=2)
+    assert [t.status for t in tasks] == ["run", "run", "skip: 3 frames, --group-size is 2"]
