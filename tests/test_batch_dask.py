@@ -97,6 +97,17 @@ def test_a_worker_killed_mid_run_loses_no_set(shoot, tmp_path, client):
     assert len(_pixels(tmp_path / "hdr")) == SETS  # every output reads
 
 
+def test_a_failing_set_is_reported_and_the_others_finish(shoot, tmp_path, client,
+                                                        write_brackets):
+    # One frame of set "c" of another size: that set fails, on whichever worker.
+    write_brackets([1 / 4], folder=shoot, size=(8, 8), names=["pos_c_1_4.png"])
+    tasks, results = merge_shoot(shoot, f"{tmp_path}/hdr/{{first_stem}}.exr", client=client)
+    failed = [r for r in results if not r.ok]
+    assert len(results) == SETS and [r.index for r in failed] == [3]
+    assert "pos_c_1_4.png" in failed[0].printed
+    assert len(_pixels(tmp_path / "hdr")) == SETS - 1
+
+
 _CLIENT_SCRIPT = textwrap.dedent("""
     import os, sys
     from distributed import Client
