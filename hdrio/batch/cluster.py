@@ -41,13 +41,13 @@ def parse_address(text: str) -> tuple[str, int | None]:
 
 def local_cluster(workers: int | None = None) -> Any:
     """A ``LocalCluster`` of ``workers`` processes (default: one per CPU), one thread
-    each, kernel threads shared out between them; no dashboard."""
+    each, kernel threads shared out between them; its dashboard on a free port."""
     from hdrio.parallel import threads
 
     distributed = _distributed()
     workers = workers or threads()
     return distributed.LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
         env={"HDRIO_THREADS": str(worker_threads(workers))})
 
 
