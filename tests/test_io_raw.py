@@ -134,7 +134,7 @@ def test_given_white_balance_through_the_chain(dngs, truth, tmp_path, capsys):
 
 
 def test_raw_frames_group_by_their_own_capture_times(dngs, truth, tmp_path):
-    from hdrio.grouping import group_brackets
+    from hdrio.batch.grouping import group_brackets
 
     later = datetime.datetime(2026, 3, 1, 10, 5, 0)  # five minutes on: another position
     more = [write_dng(tmp_path / f"IMG_{9 + j:04d}.dng", mosaic_of(truth, t), t,

@@ -176,7 +176,11 @@ def load_operations() -> None:
 
     A new family of operations (colour management, say) adds its module here.
     """
+    import importlib
+
     from hdrio.cli import chain_colour, chain_ops, chain_output, chain_pictures  # noqa: F401
+
+    importlib.import_module("hdrio.cli.chain_batch")  # last: --group's settings end the help
 
 
 def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
@@ -189,7 +193,7 @@ def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
         chain.progress.step(step.text)
         try:
             if step.name == "--group":
-                run_groups(chain, step, list(steps[index + 1:]))
+                run_groups(chain, step, list(steps[index + 1:]), list(steps))
                 return
             if step.name == "read":
                 read_input(chain, step.value)
@@ -237,7 +241,7 @@ def help_text() -> str:
 def main(argv: Sequence[str]) -> int:
     """Run a chain; returns the exit code (2 with one line on stderr for bad input)."""
     load_operations()  # first, so that --help lists operations in the modules' order
-    from hdrio.cli.chain_batch import print_plan
+    from hdrio.cli.chain_batch import check_batch_options, print_plan
     from hdrio.cli.chain_output import check_outputs
 
     if not argv or argv[0] in ("-h", "--help"):
@@ -250,6 +254,7 @@ def main(argv: Sequence[str]) -> int:
             if step.name != "read" and not OPERATIONS[step.name].per_set:
                 OPERATIONS[step.name].run(chain, step.value)
         check_outputs(steps)
+        check_batch_options(steps)
         if chain.dry_run:
             print_plan(chain, steps)
             return 0

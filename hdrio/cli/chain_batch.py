@@ -1,66 +1,164 @@
-"""``--group``: the rest of the chain on each bracket set, in a process pool; ``--dry-run``.
+"""``--group`` and its settings: the chain's front end to :mod:`hdrio.batch`.
 
-Sets whose outputs are all complete (see :func:`hdrio.grouping.output_is_complete`) are
-skipped, so a second run over the same folder does nothing and says so.
+Parsing and printing only: grouping, fingerprints, what is done, the local pool, Dask,
+shards and the clean-up of killed writers' temporary files are in :mod:`hdrio.batch`.
+Here the rest of the chain after ``--group`` becomes the work of each set, and its steps
+(all but those that only say how to run) the recipe of each set's fingerprint.
 """
 
 from __future__ import annotations
 
 import io
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from functools import partial
 from pathlib import Path
 from typing import Any
 
-from hdrio.cli.chain import FLOAT_SUFFIXES, Chain, ChainError, Step, run_steps
+from hdrio.cli.chain import (
+    FLOAT_SUFFIXES,
+    Chain,
+    ChainError,
+    Step,
+    operation,
+    run_steps,
+)
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 
+# Steps that say how to run, not what to make: not part of a set's fingerprint.
+_HOW_TO_RUN = frozenset({"-v", "--threads", "--dry-run", "--group", "--force", "--dask",
+                         "--shard", "--list-sets", "--group-size", "--group-gap"})
+# Steps that name outputs of a set (pattern fields allowed).
+_OUTPUTS = frozenset({"-o", "--plot-response", "--plot-contribution", "--plot-stops",
+                      "--contact-sheet"})
 
-def _set_outputs(steps: list[Step], fields: dict[str, str]) -> list[Path]:
+
+def _positive_int(values: list[str]) -> int:
+    if not values[0].isdigit() or int(values[0]) < 1:
+        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
+    return int(values[0])
+
+
+def _seconds(values: list[str]) -> float:
+    try:
+        value = float(values[0])
+    except ValueError:
+        raise ValueError(f"expected seconds, got {values[0]!r}") from None
+    if not value >= 0:
+        raise ValueError(f"expected seconds >= 0, got {values[0]!r}")
+    return value
+
+
+def _shard(values: list[str]) -> tuple[int, int]:
+    from hdrio.batch.plan import parse_shard
+
+    return parse_shard(values[0])
+
+
+def _dask_address(values: list[str]) -> str:
+    from hdrio.batch.cluster import parse_address
+
+    parse_address(values[0])
+    return values[0]
+
+
+def _setting(key: str):
+    def run(chain: Chain, value: Any) -> None:
+        chain.settings[key] = True if isinstance(value, list) else value
+
+    return run
+
+
+operation("--force", per_set=False, help="with --group: run every set, even those whose "
+          "outputs are recorded as made from the same inputs and settings",
+          example="shoot/ --group --force --merge -o {first_stem}.exr")(_setting("force"))
+operation("--group-size", "N", convert=_positive_int, per_set=False,
+          help="with --group: every N frames in capture order are one set (a fixed bracket "
+               "count), instead of splitting on time gaps and repeated exposures",
+          example="shoot/ --group-size 7 --group --merge -o {first_stem}.exr"
+          )(_setting("group_size"))
+operation("--group-gap", "SECONDS", convert=_seconds, per_set=False,
+          help="with --group: a pause longer than this after a frame ends starts a new set "
+               "(default 2)", example="shoot/ --group-gap 5 --group --merge -o {index}.exr"
+          )(_setting("group_gap"))
+operation("--shard", "K/N", convert=_shard, per_set=False,
+          help="with --group: run only the K-th of N equal, fixed parts of the sets (one "
+               "farm task each; together the N tasks cover every set once)",
+          example="shoot/ --shard 3/10 --group --merge -o {first_stem}.exr"
+          )(_setting("shard"))
+operation("--list-sets", per_set=False,
+          help="with --group: print the sets as JSON (files, exposure times, outputs, "
+               "fingerprint, status run/done/skip) and do nothing else",
+          example="shoot/ --list-sets --group --merge -o {first_stem}.exr"
+          )(_setting("list_sets"))
+operation("--dask", "ADDRESS", convert=_dask_address, per_set=False,
+          help="with --group: run the sets on a Dask cluster: a scheduler address "
+               "(tcp://host:8786) or local[:N] (N worker processes here); the farm extra",
+          example="shoot/ --dask local:2 --group --merge -o {first_stem}.exr"
+          )(_setting("dask"))
+
+
+def check_batch_options(steps: list[Step]) -> None:
+    """Refuse batch settings without ``--group`` before any work."""
+    names = {step.name for step in steps}
+    if "--group" in names:
+        return
+    for step in steps:
+        if step.name in _HOW_TO_RUN - {"-v", "--threads", "--dry-run", "--group"}:
+            raise ChainError(f"{step.text}: only with --group (a folder or list of "
+                             "bracket sets)")
+
+
+# ------------------------------------------------------------------------------ plan
+
+
+def _recipe(steps: list[Step]) -> tuple[list[str], list[Path]]:
+    """The fingerprint's recipe (the steps' text) and the files the settings name."""
+    recipe, named = [], []
+    for step in steps:
+        if step.name == "read" or step.name in _HOW_TO_RUN:
+            continue
+        recipe.append(step.text)
+        if step.name in _OUTPUTS:
+            continue
+        values = step.value if isinstance(step.value, list | tuple) else [step.value]
+        named += [Path(v) for v in values if isinstance(v, str) and Path(v).is_file()]
+    return recipe, named
+
+
+def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
+    """The :class:`hdrio.batch.SetTask` of every set (of this shard)."""
+    from hdrio.batch.grouping import DEFAULT_MAX_GAP_S, group_brackets
+    from hdrio.batch.plan import plan_sets
     from hdrio.cli.chain_output import output_path
-
-    probe = Chain(fields=fields)
-    return [output_path(probe, step.value) for step in steps if step.name == "-o"]
-
-
-def _plan_sets(chain: Chain, rest: list[Step]) -> list[tuple[int, Any, list[Path], str]]:
-    """``(index, set, outputs, status)`` per set; status ``merge`` or why it is skipped."""
-    from hdrio.grouping import group_brackets, output_is_complete
 
     if not chain.brackets:
         raise ChainError("no brackets to group: give a folder or files before --group")
     if "exposures" in chain.settings:
         raise ChainError("--exposures cannot serve several sets; use EXIF (the default) "
                          "or --exposures-from")
-    plan = []
-    for index, bracket_set in enumerate(group_brackets(chain.brackets), start=1):
-        outputs = _set_outputs(rest, bracket_set.fields(index))
-        if len(bracket_set.frames) < 2:
-            status = "skip: a single frame is not a bracket set"
-        elif outputs and all(output_is_complete(o, bracket_set.files) for o in outputs):
-            status = "skip: outputs complete"
-        else:
-            status = "merge"
-        plan.append((index, bracket_set, outputs, status))
-    return plan
+    settings = chain.settings
+
+    def outputs_for(fields: dict[str, str]) -> list[Path]:
+        probe = Chain(fields=fields)
+        return [output_path(probe, step.value) for step in rest if step.name in _OUTPUTS]
+
+    recipe, named = _recipe(steps)
+    sets = group_brackets(chain.brackets, settings.get("group_gap", DEFAULT_MAX_GAP_S),
+                          settings.get("group_size"))
+    return plan_sets(sets, outputs_for, recipe, named, size=settings.get("group_size"),
+                     force=bool(settings.get("force")), shard=settings.get("shard"))
 
 
-def _describe(bracket_set) -> str:
-    from hdrio.cli.commands import _seconds
-
-    times = sorted(f.exposure for f in bracket_set.frames if f.exposure is not None)
-    span = f", {_seconds(times[0])} .. {_seconds(times[-1])}" if times else ""
-    return (f"{len(bracket_set.frames)} frames{span}: {bracket_set.frames[0].path.name}"
-            f" .. {bracket_set.frames[-1].path.name}")
+# ------------------------------------------------------------------------------- run
 
 
-def _run_set(steps: list[Step], files: list[Path], fields: dict[str, str],
-             settings: dict[str, Any], verbose: bool) -> tuple[bool, str]:
-    """Run ``steps`` on one set (in a worker process); ``(ok, what it printed)``."""
+def _run_set(steps: list[Step], settings: dict[str, Any], verbose: bool,
+             task) -> tuple[bool, str]:
+    """Run ``steps`` on one set (in a worker); ``(ok, what it printed)``."""
     out = io.StringIO()
+    files = list(task.files)
     chain = Chain(out=out, progress=Progress(quiet=not verbose), brackets=list(files),
-                  settings=dict(settings), fields=fields, inputs=list(files))
+                  settings=dict(settings), fields=dict(task.fields), inputs=list(files))
     try:
         run_steps(chain, steps)
     except HdrioError as error:
@@ -68,62 +166,102 @@ def _run_set(steps: list[Step], files: list[Path], fields: dict[str, str],
     return True, out.getvalue()
 
 
-def run_groups(chain: Chain, step: Step, rest: list[Step]) -> None:
+def _client(address: str):
+    """``(client, cluster or None)`` for ``--dask``."""
+    from hdrio.batch.cluster import LOCAL, local_cluster, parse_address
+
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ChainError("--dask needs Dask: pip install 'hdrio[farm]'") from None
+    where, workers = parse_address(address)
+    if where == LOCAL:
+        cluster = local_cluster(workers)
+        return Client(cluster), cluster
+    try:
+        return Client(where, timeout=30), None
+    except OSError as error:
+        raise ChainError(f"--dask {address}: cannot reach the scheduler ({error})") from None
+
+
+def run_groups(chain: Chain, step: Step, rest: list[Step], steps: list[Step]) -> None:
     """Split the pending brackets into sets and run ``rest`` on each, in parallel."""
-    plan = _plan_sets(chain, rest)
-    todo = [entry for entry in plan if entry[3] == "merge"]
-    chain.say(f"{len(plan)} bracket sets; {len(todo)} to merge, "
-              f"{len(plan) - len(todo)} skipped")
-    for index, bracket_set, _outputs, status in plan:
-        if status != "merge":
-            chain.say(f"  set {index}: {_describe(bracket_set)} ({status})")
-    if not todo:
-        chain.say("nothing to do: every set's outputs are complete")
+    from hdrio.batch import DONE, RUN, run_sets, sets_json
+
+    tasks = _plan(chain, steps, rest)
+    if chain.settings.get("list_sets"):
+        print(sets_json(tasks), file=chain.out)
         return
-    workers = min(chain.settings.get("threads") or multiprocessing.cpu_count(), len(todo))
-    failed = []
-    # spawn: OpenImageIO and numba keep thread pools that a fork would copy mid-flight.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(_run_set, rest, bracket_set.files,
-                               bracket_set.fields(index), chain.settings,
-                               not chain.progress.quiet): (index, bracket_set)
-                   for index, bracket_set, _outputs, _status in todo}
-        for done, future in enumerate(as_completed(futures), start=1):
-            index, bracket_set = futures[future]
-            ok, printed = future.result()
-            chain.progress.bar(done, len(todo), f"set {index}")
-            chain.say(f"  set {index}: {_describe(bracket_set)} "
-                      f"({'merged' if ok else 'FAILED'})")
-            for line in printed.strip().splitlines():
-                chain.say(f"    {line}")
-            if not ok:
-                failed.append(index)
+    todo = [task for task in tasks if task.status == RUN]
+    done = sum(task.status == DONE for task in tasks)
+    chain.say(f"{len(tasks)} bracket sets; {len(todo)} to merge, {done} done, "
+              f"{len(tasks) - len(todo) - done} skipped")
+    for task in tasks:
+        if task.status != RUN:
+            why = ("done: outputs recorded with the same inputs and settings"
+                   if task.status == DONE else task.status)
+            chain.say(f"  set {task.index}: {task.describe()} ({why})")
+    if not todo:
+        chain.say("nothing to do: every set is done or skipped")
+        return
+    bar = Progress(quiet=False)  # a bar of sets, on a terminal only
+
+    def report(result, count: int, total: int) -> None:
+        task = next(t for t in todo if t.index == result.index)
+        bar.bar(count, total, f"set {task.index}")
+        chain.say(f"  set {task.index} [{count}/{total}]: {task.describe()} "
+                  f"({'merged' if result.ok else 'FAILED'} in {result.seconds:.1f} s, "
+                  f"worker peak {result.peak_rss_mb:.0f} MB)")
+        for line in result.printed.strip().splitlines():
+            chain.say(f"    {line}")
+
+    work = partial(_run_set, rest, chain.settings, not chain.progress.quiet)
+    client = cluster = None
+    if chain.settings.get("dask"):
+        client, cluster = _client(chain.settings["dask"])
+    try:
+        results = run_sets(tasks, work, client=client, workers=chain.settings.get("threads"),
+                           on_result=report)
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    failed = sorted(result.index for result in results if not result.ok)
     if failed:
         raise ChainError(f"{len(failed)} of {len(todo)} sets failed (sets "
-                         f"{', '.join(map(str, sorted(failed)))}); see above")
+                         f"{', '.join(map(str, failed))}); see above")
 
 
 def print_plan(chain: Chain, steps: list[Step]) -> None:
     """``--dry-run``: the steps, the sets ``--group`` would find, and what would be done."""
+    from hdrio.batch import DONE, RUN, sets_json
     from hdrio.cli.chain_ops import read_input
 
-    chain.say("plan (dry run, nothing is written):")
+    if not chain.settings.get("list_sets"):
+        chain.say("plan (dry run, nothing is written):")
     for number, step in enumerate(steps, start=1):
         if step.name == "read":
             kind = ("folder" if step.value.is_dir() else "image"
                     if step.value.suffix.lower() in FLOAT_SUFFIXES else "bracket")
-            chain.say(f"  {number}. read {step.value} ({kind})")
+            if not chain.settings.get("list_sets"):
+                chain.say(f"  {number}. read {step.value} ({kind})")
             if kind != "image":
                 read_input(chain, step.value)
             continue
-        chain.say(f"  {number}. {step.text}")
         if step.name == "--group":
-            for index, bracket_set, outputs, status in _plan_sets(chain, steps[number:]):
-                targets = ", ".join(str(o) for o in outputs) or "no output"
-                chain.say(f"     set {index}: {_describe(bracket_set)} -> {targets} "
-                          f"({'would merge' if status == 'merge' else status})")
+            tasks = _plan(chain, steps, steps[number:])
+            if chain.settings.get("list_sets"):
+                print(sets_json(tasks), file=chain.out)
+                return
+            chain.say(f"  {number}. {step.text}")
+            for task in tasks:
+                targets = ", ".join(str(o) for o in task.outputs) or "no output"
+                what = {RUN: "would merge", DONE: "done: would skip"}.get(task.status,
+                                                                        task.status)
+                chain.say(f"     set {task.index}: {task.describe()} -> {targets} ({what})")
             return
+        chain.say(f"  {number}. {step.text}")
         if step.name == "-o":
             path = Path(step.value)
             chain.say(f"     would write {path}" + (" (exists: would be replaced)"

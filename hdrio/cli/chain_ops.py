@@ -38,7 +38,7 @@ def _number(values: list[str]) -> float:
 
 def read_input(chain: Chain, path: Path) -> None:
     """A positional input: brackets wait for --merge; float images go on the stack."""
-    from hdrio.grouping import list_images
+    from hdrio.batch.grouping import list_images
 
     if path.is_dir():
         files = list_images(path)

@@ -183,8 +183,9 @@ def _dry_run(chain: Chain, _values: list[str]) -> None:
 
 @operation("--group", help="split the pending brackets into bracket sets (capture time, "
                            "exposure pattern, sequence) and run the rest of the chain on "
-                           "each set, in parallel; sets whose outputs are complete are "
-                           "skipped", example="shoot/ --group --merge -o {first_stem}_hdr.exr")
+                           "each set, in parallel; sets already done from the same "
+                           "inputs and settings are skipped (--force redoes them)",
+           example="shoot/ --group --merge -o {first_stem}_hdr.exr")
 def _group(chain: Chain, _values: list[str]) -> None:  # run by chain.run_steps
     raise AssertionError("--group is run by run_steps")
 

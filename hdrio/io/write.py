@@ -7,6 +7,8 @@ half-written EXR.
 from __future__ import annotations
 
 import os
+import re
+import socket
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -65,9 +67,30 @@ def _type_of(value) -> tuple[str, object]:
 _ROWS_PER_WRITE = 64
 
 
+# The writer's host (letters, digits and '-') and process id are in the temporary name,
+# so a later run can prove a leftover is stale (its writer is dead): hdrio.batch.partial.
+_HOST = re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname()) or "host"
+TEMPORARY_NAME = re.compile(r"^\.(?P<stem>.*)\.(?P<host>[A-Za-z0-9-]+)-(?P<pid>\d+)"
+                            r"-[0-9a-f]{8}\.partial(?P<suffix>\.[^.]*)?$")
+
+
 def _temporary_beside(path: Path) -> Path:
-    """A hidden temporary name in ``path``'s folder (same file system: rename is atomic)."""
-    return path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+    """A hidden temporary name in ``path``'s folder (same file system: rename is atomic):
+    ``.{stem}.{host}-{pid}-{8 hex}.partial{suffix}`` (:data:`TEMPORARY_NAME`)."""
+    return path.with_name(f".{path.stem}.{_HOST}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+                          f".partial{path.suffix}")
+
+
+def temporary_writer(path: str | Path) -> tuple[str, int] | None:
+    """``(host, pid)`` of the process writing the temporary file ``path``, or ``None``
+    when the name is not one of hdrio's temporary names."""
+    match = TEMPORARY_NAME.match(Path(path).name)
+    return (match["host"], int(match["pid"])) if match else None
+
+
+def this_writer() -> tuple[str, int]:
+    """``(host, pid)`` as this process puts them in its temporary names."""
+    return _HOST, os.getpid()
 
 
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,

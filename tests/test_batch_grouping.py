@@ -8,8 +8,9 @@ from pathlib import Path
 import OpenEXR
 import pytest
 
+from hdrio.batch.grouping import Frame, format_times, group_brackets, group_frames
 from hdrio.cli import main
-from hdrio.grouping import Frame, group_brackets, group_frames, output_is_complete
+from tests.conftest import tutorial_name
 
 START = datetime.datetime(2026, 3, 1, 10, 0, 0)
 # Three sets with different exposure patterns, shot a minute apart: 3 frames 2 EV apart,
@@ -112,8 +113,8 @@ def test_sets_merge_in_parallel_and_a_second_run_does_nothing(shoot, tmp_path, c
             "-o", f"{out}/{{first_stem}}.jpg"]
     assert main(argv) == 0, capsys.readouterr().err
     stdout = capsys.readouterr().out
-    assert "3 bracket sets; 3 to merge, 0 skipped" in stdout
-    assert stdout.count("(merged)") == 3
+    assert "3 bracket sets; 3 to merge, 0 done, 0 skipped" in stdout
+    assert stdout.count("(merged in ") == 3
     for numbers in NUMBERS:
         exr = out / f"IMG_{numbers[0]:04d}_hdr.exr"
         sources = OpenEXR.File(str(exr)).header()["hdrio:sourceFiles"]
@@ -123,20 +124,9 @@ def test_sets_merge_in_parallel_and_a_second_run_does_nothing(shoot, tmp_path, c
 
     assert main(argv) == 0
     stdout = capsys.readouterr().out
-    assert "3 bracket sets; 0 to merge, 3 skipped" in stdout
+    assert "3 bracket sets; 0 to merge, 3 done, 0 skipped" in stdout
     assert "nothing to do" in stdout
     assert {p: p.stat().st_mtime_ns for p in out.iterdir()} == written  # nothing rewritten
-
-
-def test_an_output_for_other_sources_is_not_complete(shoot, tmp_path, capsys):
-    out = tmp_path / "hdr"
-    out.mkdir()
-    files = sorted(shoot.iterdir())
-    exr = out / "first.exr"
-    assert main([*map(str, files[:3]), "--merge", "-o", str(exr)]) == 0
-    assert output_is_complete(exr, files[:3])
-    assert not output_is_complete(exr, files[:2])
-    assert not output_is_complete(out / "missing.exr", files[:3])
 
 
 def test_a_failing_set_is_reported_and_the_others_still_merge(shoot, tmp_path, capsys,
@@ -153,7 +143,7 @@ def test_a_failing_set_is_reported_and_the_others_still_merge(shoot, tmp_path, c
     assert code == 2
     assert "1 of 3 sets failed (sets 3)" in captured.err
     assert "IMG_0011.jpg" in captured.out and "brackets must match" in captured.out
-    assert sorted(p.name for p in out.iterdir()) == ["IMG_0001.exr", "IMG_0002.exr"]
+    assert sorted(p.name for p in out.glob("*.exr")) == ["IMG_0001.exr", "IMG_0002.exr"]
 
 
 def test_an_unreadable_file_in_the_folder_is_named(shoot, tmp_path, capsys):
@@ -162,3 +152,73 @@ def test_an_unreadable_file_in_the_folder_is_named(shoot, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "--group" in err and "IMG_0099.jpg" in err
+
+
+# ------------------------------------------------------------------ grouping real shoots
+
+
+def test_three_file_name_ladders_in_one_folder_are_three_sets(write_brackets, tmp_path):
+    # Three positions of one 7-frame ladder, exposures in the names (north_1_64.png ...),
+    # no EXIF: before, one 21-frame set with repeated exposures.
+    ladder = [1 / 64, 1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0]
+    folder = tmp_path / "ladders"
+    for stem in ("north", "east", "south"):
+        write_brackets(ladder, folder=folder, size=(8, 8),
+                       names=[tutorial_name(t, stem=stem) for t in ladder])
+    sets = group_brackets(sorted(folder.iterdir()))
+    assert len(sets) == 3
+    for bracket_set in sets:
+        stems = {frame.path.name.split("_")[0] for frame in bracket_set.frames}
+        assert len(stems) == 1 and len(bracket_set.frames) == 7
+        assert sorted(bracket_set.times_s) == pytest.approx(ladder, rel=1e-9)
+
+
+def test_auto_exposure_bracketing_order_0_minus2_plus2():
+    # AEB shoots the metered exposure first, then -2 EV and +2 EV; no capture times.
+    pattern = [1 / 60, 1 / 240, 1 / 15]
+    frames = [Frame(Path(f"DSC{n:05d}.ARW"), t, None, n)
+              for n, t in enumerate(pattern * 3, start=101)]
+    sets = group_frames(frames[::-1])
+    assert [[f.sequence for f in s.frames] for s in sets] == [[101, 102, 103],
+                                                              [104, 105, 106],
+                                                              [107, 108, 109]]
+    assert all([f.exposure for f in s.frames] == pattern for s in sets)
+
+
+def test_a_fixed_group_size_overrides_the_exposure_rules():
+    # Five frames of one exposure each set (a bracket mode that repeats the base frame):
+    # the repeat rule alone would split them; --group-size 5 keeps every five together.
+    pattern = [1 / 60, 1 / 240, 1 / 15, 1 / 60, 1 / 4]
+    frames = [Frame(Path(f"IMG_{n:04d}.jpg"), t, START, n)
+              for n, t in enumerate(pattern * 2 + [1 / 60], start=1)]
+    sets = group_frames(frames, size=5)
+    assert [len(s.frames) for s in sets] == [5, 5, 1]
+    assert [f.sequence for f in sets[1].frames] == [6, 7, 8, 9, 10]
+
+
+def test_a_time_gap_splits_sets_without_repeated_exposures():
+    # Two different patterns 10 s apart: the gap splits them; --group-gap 20 joins them.
+    frames = [Frame(Path(f"IMG_{n}.jpg"), t, START + datetime.timedelta(seconds=s), n, t)
+              for n, (t, s) in enumerate([(1 / 100, 0), (1 / 25, 1), (1 / 6, 11),
+                                          (2 / 3, 12)], start=1)]
+    assert [len(s.frames) for s in group_frames(frames)] == [2, 2]
+    assert [len(s.frames) for s in group_frames(frames, max_gap_s=20)] == [4]
+
+
+def test_listing_prints_real_exposure_times_not_relative_exposure(write_brackets, tmp_path,
+                                                                 capsys):
+    # ISO 400 and f/8: t * ISO/100 / N^2 = t / 16; the listing must say 1/64 s, not 1/1024.
+    folder = tmp_path / "iso"
+    times = (1 / 64, 1 / 16, 1 / 4)
+    write_brackets(times, folder=folder, suffix=".jpg", size=(8, 8),
+                   names=[f"IMG_{n}.jpg" for n in (1, 2, 3)],
+                   attributes=[{"ExposureTime": t, "FNumber": 8.0,
+                                "Exif:PhotographicSensitivity": 400} for t in times])
+    assert main([str(folder), "--group", "--merge", "-o", f"{tmp_path}/{{index}}.exr",
+                 "--dry-run"]) == 0
+    line = next(li for li in capsys.readouterr().out.splitlines() if "set 1:" in li)
+    assert "3 frames, 1/64 1/16 1/4 s:" in line
+
+
+def test_format_times():
+    assert format_times([1 / 8000, 1 / 3, 0.5, 1.0, 30.0, None]) == "1/8000 1/3 1/2 1 30 ? s"

@@ -1,0 +1,165 @@
+"""Run sets: the per-set wrapper every executor uses, and the local process pool.
+
+:func:`run_set` is what runs in a worker, whichever executor started it: it runs the
+front end's ``work`` on one set, checks that every output is in place, and then records
+the set in the journal (:mod:`hdrio.batch.journal`), so a set is recorded by the process
+that finished it even if the process that started the batch is gone.
+
+Pool workers die with their parent: on Linux through ``PR_SET_PDEATHSIG`` (the kernel
+sends SIGKILL when the parent dies), and everywhere through a thread that polls the
+parent's process id, so a killed ``hdrio`` leaves no worker behind.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+from hdrio.batch.journal import record_done
+from hdrio.batch.partial import clean_partials
+from hdrio.batch.plan import SetTask
+
+Work = Callable[[SetTask], tuple[bool, str]]
+OnResult = Callable[["SetResult", int, int], None]
+_PR_SET_PDEATHSIG = 1
+_PARENT_POLL_S = 0.5
+
+
+@dataclass(frozen=True)
+class SetResult:
+    """What became of one set.
+
+    Attributes
+    ----------
+    index : int
+        The set's index (:attr:`SetTask.index`).
+    ok : bool
+        Every output written and the set recorded.
+    printed : str
+        What the work printed (the error on failure).
+    host, pid :
+        Where it ran.
+    seconds : float
+        Wall time of the set, in seconds.
+    peak_rss_mb : float
+        Peak resident memory of the worker process so far, in MiB.
+    """
+
+    index: int
+    ok: bool
+    printed: str
+    host: str
+    pid: int
+    seconds: float
+    peak_rss_mb: float
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory in MiB: ``VmHWM`` on Linux (``ru_maxrss``
+    carries a parent's peak over fork and exec), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    try:
+        import resource
+    except ImportError:  # Windows
+        return float("nan")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 1024.0**2 if sys.platform == "darwin" else peak / 1024.0
+
+
+def run_set(work: Work, task: SetTask) -> SetResult:
+    """Run ``work(task)`` and record the set when it succeeded (in the worker).
+
+    First the stale temporary files of this host in the set's output folders are removed
+    (:mod:`hdrio.batch.partial`): on a cluster, each machine cleans its own.
+    """
+    start = time.perf_counter()
+    clean_partials({path.parent for path in task.outputs})
+    try:
+        ok, printed = work(task)
+    except Exception as error:  # one set's failure must not stop the others
+        ok, printed = False, f"error: {type(error).__name__}: {error}\n"
+    if ok:
+        missing = [str(path) for path in task.outputs if not path.is_file()]
+        if missing:
+            ok, printed = False, printed + f"error: not written: {', '.join(missing)}\n"
+        else:
+            record_done(task.outputs, task.fingerprint, task.files)
+    return SetResult(task.index, ok, printed, socket.gethostname(), os.getpid(),
+                     time.perf_counter() - start, _peak_rss_mb())
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Make this process exit when ``parent_pid`` (its parent) does."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(_PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="hdrio-parent-watch", daemon=True).start()
+
+
+def worker_threads(workers: int) -> int:
+    """Kernel threads per worker when ``workers`` share this machine's CPUs."""
+    from hdrio.parallel import threads
+
+    return max(1, threads() // max(1, workers))
+
+
+def _start_worker(parent_pid: int, threads: int) -> None:
+    die_with_parent(parent_pid)
+    os.environ.setdefault("HDRIO_THREADS", str(threads))
+
+
+def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
+              on_result: OnResult | None = None) -> list[SetResult]:
+    """Run ``tasks`` in a pool of ``workers`` processes on this machine (one: serially,
+    in this process).
+
+    ``on_result(result, done, total)`` is called in this process as each set finishes.
+    Results are returned in the order the sets finished.
+    """
+    if not tasks:
+        return []
+    workers = max(1, min(workers, len(tasks)))
+    results = []
+    if workers == 1:  # serial: in this process, without a pool's start-up (seconds)
+        for task in tasks:
+            results.append(run_set(work, task))
+            if on_result is not None:
+                on_result(results[-1], len(results), len(tasks))
+        return results
+    # spawn: OpenImageIO and numba keep thread pools that a fork would copy mid-flight.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                             initializer=_start_worker,
+                             initargs=(os.getpid(), worker_threads(workers))) as pool:
+        futures = [pool.submit(run_set, work, task) for task in tasks]
+        for future in as_completed(futures):
+            results.append(future.result())
+            if on_result is not None:
+                on_result(results[-1], len(results), len(tasks))
+    return results
