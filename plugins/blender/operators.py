@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
-from hdrio.errors import HdrioError
+from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.pipeline import MergeOptions, merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
@@ -106,6 +106,11 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
     output: StringProperty(  # type: ignore[valid-type]
         name="Output", subtype="FILE_PATH",
         description="EXR to write (default: merged.exr beside the brackets)")
+    exposures: StringProperty(  # type: ignore[valid-type]
+        name="Exposures",
+        description="Exposure of each selected file in seconds, in the order of the file "
+                    "names, as `hdrio merge --exposures` (e.g. 1/8 1 8); empty: from the "
+                    "files' EXIF or names")
     overwrite: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Overwrite", default=False, options={"SKIP_SAVE"},
         description="Replace the output EXR if it exists")
@@ -116,7 +121,8 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        paths = [os.path.join(self.directory, item.name) for item in self.files if item.name]
+        paths = sorted(os.path.join(self.directory, item.name)
+                       for item in self.files if item.name)
         if len(paths) < 2:
             self.report({"ERROR"}, "select at least two bracketed images")
             return {"CANCELLED"}
@@ -131,8 +137,17 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
             return {"CANCELLED"}
         if not kernels_ready(self):
             return {"CANCELLED"}
+        exposures = self.exposures.replace(",", " ").split() or None
         try:
-            merge_files(paths, output, options=MergeOptions())
+            merge_files(paths, output, exposures=exposures, options=MergeOptions())
+        except InputError as error:
+            if "no exposure time" in error.problem:  # hdrio's words name a CLI option
+                self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "
+                                       "in the file name): type them in Exposures, in the "
+                                       "file browser's side panel (e.g. 1/8 1 8)")
+            else:
+                self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
         except HdrioError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
