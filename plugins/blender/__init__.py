@@ -25,21 +25,6 @@ def _classes() -> tuple:
     return (*nodes.CLASSES, *operators.CLASSES, *panel.CLASSES)
 
 
-def _refresh_curves(*_arguments) -> None:
-    """After a file is loaded: recompute the HDR Merge nodes' curve tables.
-
-    Blender rebuilds a curve's table from its points lazily; a file saved and opened
-    again must not render with stale tables (Blender 4.2 did, from the second open).
-    """
-    import bpy
-
-    for tree in bpy.data.node_groups:
-        if tree.name.startswith(".hdrio"):
-            for node in tree.nodes:
-                if node.bl_idname == "CompositorNodeCurveRGB":
-                    node.mapping.update()
-
-
 def _show_warmup_progress() -> float | None:
     """Timer: the kernel warm-up's progress in the window manager and the status bar."""
     import bpy
@@ -64,13 +49,13 @@ def _show_warmup_progress() -> float | None:
 def register() -> None:
     import bpy
 
-    from . import panel
+    from . import nodes, panel
     from .warmup import WARMUP
 
     for cls in _classes():
         bpy.utils.register_class(cls)
     panel.register_menus()
-    bpy.app.handlers.load_post.append(_refresh_curves)
+    bpy.app.handlers.load_post.append(nodes.refresh_curves)
     WARMUP.start()
     if not bpy.app.background:
         bpy.app.timers.register(_show_warmup_progress, first_interval=_PROGRESS_SECONDS)
@@ -79,12 +64,12 @@ def register() -> None:
 def unregister() -> None:
     import bpy
 
-    from . import panel
+    from . import nodes, panel
 
     if bpy.app.timers.is_registered(_show_warmup_progress):
         bpy.app.timers.unregister(_show_warmup_progress)
-    if _refresh_curves in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(_refresh_curves)
+    if nodes.refresh_curves in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(nodes.refresh_curves)
     panel.unregister_menus()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

@@ -119,7 +119,7 @@ class BakedMerge:
 
 
 def bake_merge(response: CameraResponse, exposures: Sequence[float],
-               options: MergeOptions = MergeOptions(),
+               options: MergeOptions | None = None,
                points: int = CURVE_POINTS) -> BakedMerge:
     """hdrio's merge tables for brackets of ``exposures`` (shortest first), sampled at
     ``points`` codes for the HDR Merge node.
@@ -133,12 +133,14 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
         Exposure of each bracket (seconds, or relative), in increasing order.
     options
         hdrio's merge options: ``weighting``, ``merge`` (the domain) and ``saturation``
-        are the ones the merge reads; the defaults are ``hdrio merge``'s.
+        are the ones the merge reads; ``None``: ``MergeOptions()``, ``hdrio merge``'s
+        defaults.
     points
         Curve points (at least 2); with ``code_max + 1`` or more, every code is a point.
     """
     if points < 2:
         raise ValueError(f"a curve needs at least 2 points, not {points}")
+    options = MergeOptions() if options is None else options
     exposures = np.asarray(exposures, dtype=np.float64)
     if np.any(np.diff(exposures) < 0):
         raise ValueError("exposures must be given shortest first")

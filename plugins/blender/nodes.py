@@ -10,7 +10,6 @@ import bpy
 from bpy.props import FloatVectorProperty, IntProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
-from hdrio.pipeline import MergeOptions
 
 from .baking import BakedMerge, bake_merge, response_from_json, scene_linear_response
 from .compat import show_status
@@ -131,7 +130,7 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
             response = response_from_json(self.response_json)[0]
         else:
             response = scene_linear_response()
-        return bake_merge(response, sorted(self.bracket_exposures()), MergeOptions())
+        return bake_merge(response, sorted(self.bracket_exposures()))
 
     def set_response(self, response_json: str) -> None:
         self.response_json = response_json
@@ -231,8 +230,18 @@ def view_warning(scene: bpy.types.Scene) -> str:
     return f"{view} view tone-maps it again"
 
 
-def _rebuild_reinhard(node: HdrioReinhardGlobalNode, _context=None) -> None:
-    build_reinhard_global_graph(node.node_tree)
+@bpy.app.handlers.persistent
+def refresh_curves(*_arguments) -> None:
+    """After a file is loaded (``load_post``): recompute the hdrio nodes' curve tables.
+
+    Blender rebuilds a curve's table from its points lazily; a file saved and opened
+    again must not render with stale tables (Blender 4.2 did, from the second open).
+    """
+    for tree in bpy.data.node_groups:
+        if tree.name.startswith(".hdrio"):
+            for node in tree.nodes:
+                if node.bl_idname == "CompositorNodeCurveRGB":
+                    node.mapping.update()
 
 
 class HdrioReinhardGlobalNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):

@@ -29,7 +29,7 @@ from hdrio.pipeline import MergeOptions, merge_stack  # noqa: E402
 from hdrio.synthetic import demo_scene  # noqa: E402
 from hdrio.tonemap import TONEMAP_METHODS  # noqa: E402
 from plugins.blender.compat import compositor_tree  # noqa: E402
-from plugins.blender.nodes import view_warning  # noqa: E402
+from plugins.blender.nodes import refresh_curves, view_warning  # noqa: E402
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -132,6 +132,7 @@ def test_saved_file_reopened_twice_renders_the_same_pixels(write_brackets, tmp_p
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     for attempt in range(2):
         bpy.ops.wm.open_mainfile(filepath=str(blend))
+        assert refresh_curves in bpy.app.handlers.load_post  # persistent: kept
         scene = bpy.context.scene
         node = compositor_tree(scene).nodes[name]
         again = render_to_exr(scene, node.outputs[0], tmp_path / f"reopened{attempt}.exr",
