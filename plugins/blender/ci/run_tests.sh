@@ -17,6 +17,8 @@
 #   bash plugins/blender/ci/run_tests.sh            # set up (once) and test every version
 #   HDRIO_BLENDER_VERSIONS="5.0" bash plugins/blender/ci/run_tests.sh
 #   HDRIO_BLENDER_SETUP_ONLY=1 bash plugins/blender/ci/run_tests.sh
+# The extension zip is built once and its path given to the tests in HDRIO_BLENDER_ZIP
+# (set it to test a zip built elsewhere).
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 root="$(pwd)"
@@ -81,6 +83,17 @@ PY
         fi
     done
 }
+
+# One extension zip for every version (the same linux-x64 build), made once per run.
+if [[ -z "${HDRIO_BLENDER_SETUP_ONLY:-}" && -z "${HDRIO_BLENDER_ZIP:-}" ]]; then
+    start=$SECONDS
+    dist="$(mktemp -d)"
+    trap 'rm -rf "$dist"' EXIT
+    HDRIO_BLENDER_ZIP="$("$python" -m plugins.blender.build --output-dir "$dist" | tail -1)"
+    export HDRIO_BLENDER_ZIP
+    echo "== built $(basename "$HDRIO_BLENDER_ZIP") ($(du -m "$HDRIO_BLENDER_ZIP" | cut -f1) MB)" \
+         "in $((SECONDS - start)) s"
+fi
 
 status=0
 for version in $versions; do
