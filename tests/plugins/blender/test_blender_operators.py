@@ -19,6 +19,7 @@ from blender_scene import (  # noqa: E402
     merge_node_with,
     relative_difference,
     render_to_exr,
+    solved_merge_node,
 )
 
 import plugins.blender as addon  # noqa: E402
@@ -53,10 +54,8 @@ def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     paths = write_brackets(size=size)
     scene = bpy.context.scene
     tree = clean_compositor(scene)
-    node = merge_node_with(tree, paths)
-    before = node.response_json
-    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
-        "FINISHED"}
+    before = tree.nodes.new("CompositorNodeHdrioMerge").response_json
+    node = solved_merge_node(tree, paths)
     assert node.response_json != before
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
 
@@ -69,12 +68,8 @@ def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tm
     # which hdrio's merge gives no weight; the node must reproduce these one-code notches.
     paths = sorted(shared_data("frobisher_001").glob("*.jpg"))
     scene = bpy.context.scene
-    tree = clean_compositor(scene)
-    node = merge_node_with(tree, paths)
+    node = solved_merge_node(clean_compositor(scene), paths)
     assert node.bracket_exposures() == pytest.approx([1 / 8, 1.0, 8.0])  # from EXIF
-    assert node.placeholder_brackets() == []
-    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
-        "FINISHED"}
     result = merge_stack(read_brackets(paths), MergeOptions())
     assert not np.all(result.response.supported[1:-1])  # the case this test is about
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
@@ -122,10 +117,7 @@ def test_saved_file_reopened_twice_renders_the_same_pixels(write_brackets, tmp_p
     size = (40, 96)
     paths = write_brackets(size=size)
     scene = bpy.context.scene
-    tree = clean_compositor(scene)
-    node = merge_node_with(tree, paths)
-    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
-        "FINISHED"}
+    node = solved_merge_node(clean_compositor(scene), paths)
     name = node.name
     first = render_to_exr(scene, node.outputs[0], tmp_path / "before.exr", size)
     blend = tmp_path / "merge.blend"
