@@ -145,6 +145,9 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
     if np.any(np.diff(exposures) < 0):
         raise ValueError("exposures must be given shortest first")
     domain = MERGE_METHODS.canonical(options.merge)
+    if domain not in ("log", "linear"):  # a new merge method: its tables go here
+        raise ValueError(f"the HDR Merge node bakes the 'log' and 'linear' merges, not "
+                         f"{options.merge!r}: teach plugins/blender/baking.py its tables")
     terms, estimates = merge_tables(response, exposures, options.weighting, domain)
     code_max = int(response.code_max)
     count = min(points, code_max + 1)

@@ -280,3 +280,13 @@ def test_warmup_steps_compile_hdrio_kernels():
     warmup = KernelWarmup()
     warmup.start()
     assert warmup.wait(600) and not warmup.error, warmup.error
+
+
+def test_bake_refuses_a_merge_method_it_has_no_tables_for(monkeypatch):
+    # A new default merge that merge_tables' two domains cannot express fails loudly
+    # here (and in the main suite), rather than baking the wrong node.
+    from plugins.blender import baking
+
+    monkeypatch.setattr(baking.MERGE_METHODS, "canonical", lambda name: "poisson")
+    with pytest.raises(ValueError, match="bakes the 'log' and 'linear' merges, not 'log'"):
+        bake_merge(smooth_response(), [1.0, 2.0])
