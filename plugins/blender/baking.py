@@ -1,32 +1,33 @@
-"""Bake a camera response into the tables the compositor's RGB Curves nodes hold.
+"""Bake hdrio's merge into the tables the compositor's RGB Curves nodes hold.
 
-No ``bpy`` here: this module turns a :class:`hdrio.CameraResponse` and a weighting
-function into plain arrays (and JSON, which the HDR Merge node stores), so it is tested
-without Blender.
+No ``bpy`` here: this module turns a :class:`hdrio.CameraResponse`, the brackets'
+exposures and hdrio's :class:`~hdrio.pipeline.MergeOptions` into plain arrays, so it is
+tested without Blender.
+
+The tables come from hdrio's own merge (:func:`hdrio.merge.debevec1997.merge_tables`,
+the kernel's interface): per bracket ``j``, channel ``c`` and code ``z``, the weight
+``w_j(z)`` and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear domain, ``g(z) -
+ln dt_j`` in the log domain). Whatever weights and domain the options name, the node
+follows: it computes ``sum_j w_j x_j / sum_j w_j`` (then ``exp`` in the log domain) with
+the core's saturation reset and fallback (``merge_graph.py``).
 
 The compositor sees a bracket as code values scaled to [0, 1] (the image read as
-*Non-Color*: ``z = Z / Z_max``). For each channel two curves are baked over that range:
-
-``inverse``
-    ``f^-1(Z) / peak``: the relative exposure that produced code ``Z`` (linear, not
-    ``g = ln f^-1``), divided by its largest value so that it fits a curve's [0, 1].
-``weights``
-    ``w(Z) * supported(Z)`` divided by its peak: the merge weight of hdrio's core
-    (:func:`hdrio.merge.debevec1997.merge_brackets`), zero where ``g`` was extrapolated.
-
-The node multiplies ``inverse`` back by ``peak / dt`` to get the bracket's radiance
-estimate ``E = f^-1(Z) / dt`` (relative scene-linear units, as hdrio's EXRs).
+*Non-Color*: ``z = Z / Z_max``). A curve holds values in [0, 1], so each table is stored
+as ``(value - low) / span`` and the node maps it back with one Multiply Add.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from hdrio.merge.weighting import weights_table
+from hdrio.merge.debevec1997 import MERGE_METHODS, merge_tables
+from hdrio.pipeline import MergeOptions
 from hdrio.response.curve import CameraResponse
+from hdrio.response.linear import linear_response
 
 CURVE_POINTS = 256
 """Points per baked curve. For 8-bit brackets there is one point at every code value, so
@@ -51,102 +52,144 @@ def table_squeeze(positions: np.ndarray) -> float:
 
 
 @dataclass(frozen=True)
-class BakedResponse:
-    """Per-channel curve tables of a response, ready for RGB Curves nodes.
+class CurveTable:
+    """Per-bracket, per-channel curves: ``value = curve * span + low``.
+
+    Attributes
+    ----------
+    curves
+        ``(P, N, 3)`` values in [0, 1] at the baked positions.
+    low, span
+        ``(P, 3)`` the affine map back to the table's units.
+    """
+
+    curves: np.ndarray
+    low: np.ndarray
+    span: np.ndarray
+
+    @classmethod
+    def from_values(cls, values: np.ndarray) -> CurveTable:
+        """Normalise ``(P, N, 3)`` finite values per bracket and channel (a constant
+        table gets span 1 and curve 0)."""
+        if not np.all(np.isfinite(values)):
+            raise ValueError("the merge's tables are not finite: the response overflows")
+        low = values.min(axis=1)
+        span = values.max(axis=1) - low
+        span = np.where(span > 0, span, 1.0)
+        return cls(np.clip((values - low[:, None]) / span[:, None], 0.0, 1.0), low, span)
+
+    def values(self) -> np.ndarray:
+        """The table back in its own units, ``(P, N, 3)``."""
+        return self.curves * self.span[:, None] + self.low[:, None]
+
+
+@dataclass(frozen=True)
+class BakedMerge:
+    """hdrio's merge of ``P`` brackets (shortest exposure first) as curve tables.
 
     Attributes
     ----------
     positions
         ``(N,)`` curve abscissae in [0, 1]: code ``Z`` at ``Z / code_max``.
-    inverse
-        ``(N, 3)`` ``f^-1`` at each position divided by ``peak`` (values in [0, 1]).
-    peak
-        ``(3,)`` largest ``f^-1`` of each channel (relative exposure ``E * dt``).
     weights
-        ``(N, 3)`` merge weight at each position, peak 1 (unitless).
+        ``w_j(z)`` of each bracket and channel (unitless; 0 at ``code_max``).
+    estimates
+        ``x_j(z)`` of each bracket and channel: relative radiance, or its natural log
+        when ``log_domain``.
+    log_domain
+        The weighted mean is of ``ln E`` (then exponentiated), else of ``E``.
+    per_channel
+        Saturation drops a channel on its own (hdrio's ``"channel"`` policy), else the
+        whole pixel (``"pixel"``).
     code_max
-        Saturation code of the brackets (255 or 65535); a channel at
-        ``code_max`` is saturated (dropped from that bracket and every longer one).
-    label
-        Where the response came from (shown in the node).
+        Saturation code of the brackets (255 or 65535).
     """
 
     positions: np.ndarray
-    inverse: np.ndarray
-    peak: np.ndarray
-    weights: np.ndarray
+    weights: CurveTable
+    estimates: CurveTable
+    log_domain: bool
+    per_channel: bool
     code_max: int
-    label: str
 
     @property
     def saturation_level(self) -> float:
         """Normalised code above which a channel counts as saturated (half a code below 1)."""
         return (self.code_max - 0.5) / self.code_max
 
-    def to_json(self) -> str:
-        return json.dumps({
-            "positions": self.positions.tolist(), "inverse": self.inverse.tolist(),
-            "peak": self.peak.tolist(), "weights": self.weights.tolist(),
-            "code_max": self.code_max, "label": self.label,
-        })
 
-    @classmethod
-    def from_json(cls, text: str) -> BakedResponse:
-        data = json.loads(text)
-        return cls(
-            positions=np.asarray(data["positions"], dtype=np.float64),
-            inverse=np.asarray(data["inverse"], dtype=np.float64),
-            peak=np.asarray(data["peak"], dtype=np.float64),
-            weights=np.asarray(data["weights"], dtype=np.float64),
-            code_max=int(data["code_max"]), label=str(data["label"]),
-        )
-
-
-def bake_response(response: CameraResponse, weighting: str = "Debevec1997",
-                  points: int = CURVE_POINTS, label: str | None = None) -> BakedResponse:
-    """Sample ``response`` and ``weighting`` at ``points`` codes for the HDR Merge node.
+def bake_merge(response: CameraResponse, exposures: Sequence[float],
+               options: MergeOptions | None = None,
+               points: int = CURVE_POINTS) -> BakedMerge:
+    """hdrio's merge tables for brackets of ``exposures`` (shortest first), sampled at
+    ``points`` codes for the HDR Merge node.
 
     Parameters
     ----------
     response
         hdrio's inverse response ``g = ln f^-1`` per code value (1 or 3 channels; a grey
         response is used for all three).
-    weighting
-        Name in :data:`hdrio.WEIGHTING_METHODS`, as given to hdrio's merge.
+    exposures
+        Exposure of each bracket (seconds, or relative), in increasing order.
+    options
+        hdrio's merge options: ``weighting``, ``merge`` (the domain) and ``saturation``
+        are the ones the merge reads; ``None``: ``MergeOptions()``, ``hdrio merge``'s
+        defaults.
     points
         Curve points (at least 2); with ``code_max + 1`` or more, every code is a point.
     """
     if points < 2:
         raise ValueError(f"a curve needs at least 2 points, not {points}")
+    options = MergeOptions() if options is None else options
+    exposures = np.asarray(exposures, dtype=np.float64)
+    if np.any(np.diff(exposures) < 0):
+        raise ValueError("exposures must be given shortest first")
+    domain = MERGE_METHODS.canonical(options.merge)
+    if domain not in ("log", "linear"):  # a new merge method: its tables go here
+        raise ValueError(f"the HDR Merge node bakes the 'log' and 'linear' merges, not "
+                         f"{options.merge!r}: teach plugins/blender/baking.py its tables")
+    terms, estimates = merge_tables(response, exposures, options.weighting, domain)
     code_max = int(response.code_max)
     count = min(points, code_max + 1)
     codes = np.unique(np.rint(np.linspace(0.0, code_max, count)).astype(np.int64))
-    g = np.asarray(response.log_inverse, dtype=np.float64)[codes]
-    supported = np.asarray(response.supported, dtype=bool)[codes]
-    if g.shape[1] == 1:
-        g, supported = np.repeat(g, 3, axis=1), np.repeat(supported, 3, axis=1)
-    # Divide inside the exponent: exp(g - max g) stays in [0, 1] without overflow.
-    peak_log = g.max(axis=0)
-    inverse = np.exp(g - peak_log)
-    weights = weights_table(weighting, code_max)[codes, np.newaxis] * supported
-    top = weights.max(axis=0)
-    if np.any(top <= 0):
+    weights = terms.imag[:, :, codes].transpose(0, 2, 1)  # (P, N, C)
+    values = estimates[:, :, codes].transpose(0, 2, 1)
+    if weights.shape[2] == 1:
+        weights, values = np.repeat(weights, 3, axis=2), np.repeat(values, 3, axis=2)
+    if np.any(weights.max(axis=(0, 1)) <= 0):
         raise ValueError("the response has a channel with no supported code value")
-    return BakedResponse(
-        positions=codes / code_max, inverse=inverse, peak=np.exp(peak_log),
-        weights=weights / top, code_max=code_max,
-        label=label or f"{response.method} ({code_max + 1} codes)",
-    )
+    return BakedMerge(
+        positions=codes / code_max, weights=CurveTable.from_values(weights),
+        estimates=CurveTable.from_values(values), log_domain=domain == "log",
+        per_channel=options.saturation == "channel", code_max=code_max)
 
 
-def linear_response(code_max: int = 255) -> CameraResponse:
-    """The identity response ``f^-1(Z) = Z / code_max`` (for brackets already linear,
-    such as render passes); the node's starting point before a solve.
+def scene_linear_response(code_max: int = 255) -> CameraResponse:
+    """hdrio's linear response rescaled so that ``f^-1(z) = z`` on [0, 1] codes.
 
-    ``g(0)`` is taken at half a code, so it stays finite (weights are zero there).
+    The node's starting point before a solve: a render pass (scene-linear) with exposure
+    1 comes back at its own scale. (hdrio's :func:`~hdrio.response.linear.linear_response`
+    puts 1 at the middle code instead, which would make a pass 255/128 too bright.)
     """
-    codes = np.arange(code_max + 1, dtype=np.float64)
-    g = np.log(np.maximum(codes, 0.5) / code_max)[:, np.newaxis].repeat(3, axis=1)
-    g -= g[(code_max + 1) // 2]
-    return CameraResponse(g, code_max, np.ones_like(g, dtype=bool), method="linear",
-                          parameters={"levels": code_max + 1})
+    linear = linear_response(code_max, 3)
+    shift = np.log(((code_max + 1) // 2) / code_max)
+    return CameraResponse(linear.log_inverse + shift, code_max, linear.supported,
+                          method="linear", parameters=dict(linear.parameters))
+
+
+def response_to_json(response: CameraResponse, label: str) -> str:
+    """What the node stores of a solved response (its tables are baked from it)."""
+    return json.dumps({
+        "log_inverse": response.log_inverse.tolist(), "supported": response.supported.tolist(),
+        "code_max": int(response.code_max), "method": response.method, "label": label,
+    })
+
+
+def response_from_json(text: str) -> tuple[CameraResponse, str]:
+    """The response and its label stored by :func:`response_to_json`."""
+    data = json.loads(text)
+    response = CameraResponse(np.asarray(data["log_inverse"], dtype=np.float64),
+                              int(data["code_max"]),
+                              np.asarray(data["supported"], dtype=bool),
+                              method=str(data["method"]))
+    return response, str(data["label"])

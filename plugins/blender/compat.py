@@ -1,4 +1,5 @@
-"""What differs between the Blender versions the extension supports (4.2 to 5.x).
+"""What differs between the Blender versions the extension supports (4.5 and 5.0), and
+the status bar.
 
 Facts checked on the PyPI ``bpy`` 4.5.15 and 5.0.1:
 
@@ -60,3 +61,19 @@ def find_node_tree(name: str) -> bpy.types.NodeTree | None:
     return next((scene.node_tree for scene in bpy.data.scenes
                  if getattr(scene, "node_tree", None) is not None
                  and scene.node_tree.name == name), None)
+
+
+_status_owner: int | None = None
+
+
+def show_status(text: str, owner: int = 0) -> None:
+    """Show ``text`` in every window's status bar; ``""`` clears it, but only the text
+    the same ``owner`` (a node's pointer, say) put there. No-op without windows."""
+    global _status_owner
+    if not text and _status_owner != owner:
+        return
+    _status_owner = owner if text else None
+    manager = getattr(bpy.context, "window_manager", None)
+    for window in getattr(manager, "windows", ()):
+        if window.workspace is not None:
+            window.workspace.status_text_set(text or None)

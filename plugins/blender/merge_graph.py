@@ -1,17 +1,19 @@
-"""The HDR Merge node's inside: hdrio's linear-domain merge in native compositor nodes.
+"""The HDR Merge node's inside: hdrio's merge in native compositor nodes.
 
 Per channel ``c`` and bracket ``j`` (brackets wired from the shortest exposure up), with
-``z`` the bracket read as Non-Color (code / code_max), exactly as
-:func:`hdrio.merge.debevec1997.merge_brackets` with ``domain="linear"`` and its default
-per-channel saturation policy::
+``z`` the bracket read as Non-Color (code / code_max) and the tables of
+:func:`~.baking.bake_merge` (hdrio's :func:`~hdrio.merge.debevec1997.merge_tables`)::
 
-    E_j   = inverse_c(z) * peak_c / dt_j             radiance estimate (baked curve)
-    w_j   = weights_c(z) * keep_cj                   baked weight, 0 once saturated
-    keep_cj = 0 if channel c of any bracket <= j is at code_max, else 1
-    E     = sum_j w_j E_j / sum_j w_j                where the weights sum above 0
-            else the estimate of the longest bracket kept (the shortest if none)
+    w_j   = weights_jc(z) * keep_cj                  baked per bracket, 0 once saturated
+    x_j   = estimates_jc(z)                          E_j, or ln E_j in the log domain
+    keep_cj = 0 if channel c (any channel: "pixel" policy) of a bracket <= j is at
+              code_max, else 1
+    m     = sum_j w_j x_j / sum_j w_j                where the weights sum above 0
+            else x of the longest bracket kept (the shortest if none)
+    E     = m, or exp(m) in the log domain
 
-The result is relative scene-linear radiance (``E * dt = f^-1(Z)``), as in hdrio's EXRs.
+exactly as hdrio's merge kernel (:mod:`hdrio.merge.kernel`). The result is relative
+scene-linear radiance (``E * dt = f^-1(Z)``), as in hdrio's EXRs.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from collections.abc import Sequence
 
 import bpy
 
-from .baking import BakedResponse
+from .baking import BakedMerge, CurveTable
 from .exposures import sorted_order
 from .graph import GraphBuilder
 
@@ -28,12 +30,24 @@ FLOAT32_TINY = 1.1754944e-38  # the core clips radiance to float32's smallest no
 _DENOMINATOR_FLOOR = 1e-30
 
 
-def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedResponse,
+def _table_values(build: GraphBuilder, image, baked: BakedMerge, table: CurveTable,
+                  rank: int, label: str) -> list:
+    """Bracket ``rank``'s table at the codes of ``image``, per channel, in its units."""
+    curves = build.separate(build.curves(image, baked.positions, table.curves[rank], label))
+    values = []
+    for c in range(3):
+        low, span = float(table.low[rank, c]), float(table.span[rank, c])
+        values.append(build.math("MULTIPLY", curves[c], span) if low == 0.0
+                      else build.math("MULTIPLY_ADD", curves[c], span, low))
+    return values
+
+
+def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedMerge,
                       exposures: Sequence[float]) -> None:
     """Replace the nodes of ``tree`` by the merge of its first ``len(exposures)`` inputs.
 
-    ``exposures[i]`` is the exposure of input ``i`` (seconds, or any relative unit):
-    the output is in the matching relative radiance units.
+    ``exposures[i]`` is the exposure of input ``i``; ``baked`` holds the tables of the
+    same exposures sorted shortest first (``sorted_order``).
     """
     build = GraphBuilder(tree)
     build.clear()
@@ -47,25 +61,29 @@ def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedResponse,
         exposure = float(exposures[index])
         image = group_in.outputs[index]
         codes = build.separate(image)
-        inverse = build.separate(build.curves(
-            image, baked.positions, baked.inverse, f"f^-1 ({exposure:g} s)"))
-        weights = build.separate(build.curves(
-            image, baked.positions, baked.weights, f"weight ({exposure:g} s)"))
+        weights = _table_values(build, image, baked, baked.weights, rank,
+                                f"weight ({exposure:g} s)")
+        estimates = _table_values(build, image, baked, baked.estimates, rank,
+                                  f"estimate ({exposure:g} s)")
+        saturated = [build.math("GREATER_THAN", codes[c], baked.saturation_level)
+                     for c in range(3)]
+        if not baked.per_channel:  # the tutorial's policy: any channel drops the pixel
+            anywhere = build.math("MAXIMUM", build.math("MAXIMUM", *saturated[:2]),
+                                  saturated[2])
+            saturated = [anywhere] * 3
         for c in range(3):
-            saturated = build.math("GREATER_THAN", codes[c], baked.saturation_level)
-            dropped[c] = (saturated if dropped[c] is None
-                          else build.math("MAXIMUM", dropped[c], saturated))
+            dropped[c] = (saturated[c] if dropped[c] is None
+                          else build.math("MAXIMUM", dropped[c], saturated[c]))
             keep = build.math("SUBTRACT", 1.0, dropped[c])
-            estimate = build.math("MULTIPLY", inverse[c], float(baked.peak[c]) / exposure)
             weight = build.math("MULTIPLY", weights[c], keep)
             if rank == 0:
-                numerator[c] = build.math("MULTIPLY", weight, estimate)
+                numerator[c] = build.math("MULTIPLY", weight, estimates[c])
                 denominator[c] = weight
-                fallback[c] = estimate
+                fallback[c] = estimates[c]
             else:
-                numerator[c] = build.math("MULTIPLY_ADD", weight, estimate, numerator[c])
+                numerator[c] = build.math("MULTIPLY_ADD", weight, estimates[c], numerator[c])
                 denominator[c] = build.math("ADD", weight, denominator[c])
-                change = build.math("SUBTRACT", estimate, fallback[c])
+                change = build.math("SUBTRACT", estimates[c], fallback[c])
                 fallback[c] = build.math("MULTIPLY_ADD", keep, change, fallback[c])
         build.column += 1
     channels = []
@@ -75,6 +93,8 @@ def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedResponse,
         weighted = build.math("GREATER_THAN", denominator[c], 0.0)
         merged = build.math("MULTIPLY_ADD", weighted,
                             build.math("SUBTRACT", mean, fallback[c]), fallback[c])
+        if baked.log_domain:
+            merged = build.math("EXPONENT", merged)
         channels.append(build.math("MAXIMUM", merged, FLOAT32_TINY))
     build.column += 1
     result = build.combine(channels)

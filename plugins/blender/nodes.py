@@ -9,16 +9,29 @@ from __future__ import annotations
 import bpy
 from bpy.props import FloatVectorProperty, IntProperty, StringProperty
 
-from hdrio.errors import HdrioError
+from hdrio.errors import HdrioError, InputError
 
-from .baking import BakedResponse, bake_response, linear_response
-from .exposures import exposures_for_files
+from .baking import BakedMerge, bake_merge, response_from_json, scene_linear_response
+from .compat import show_status
+from .exposures import (
+    PLACEHOLDER,
+    edited_sources,
+    exposure_state,
+    exposures_for_files,
+    input_problems,
+    placeholder_brackets,
+)
 from .merge_graph import build_merge_graph
 from .reinhard_graph import DEFAULT_KEY, DEFAULT_SATURATION, build_reinhard_global_graph
 
 MAX_BRACKETS = 16
 # 1/16 s, 1/4 s, 1 s, 4 s, ...: distinct starting values two stops apart.
 DEFAULT_EXPOSURES = tuple(4.0 ** (i - 2) for i in range(MAX_BRACKETS))
+UNSOLVED_LABEL = "linear (not solved)"
+DISPLAY_VIEW = "Standard"
+"""The view under which a display-linear image (the Reinhard node's output) is shown as is."""
+
+_FILLING: set[int] = set()  # nodes whose exposures the add-on is setting (not the user)
 
 
 def linked_image(socket: bpy.types.NodeSocket) -> bpy.types.Image | None:
@@ -40,6 +53,11 @@ def image_path(image: bpy.types.Image | None) -> str | None:
     return bpy.path.abspath(image.filepath, library=image.library)
 
 
+def merge_node_name(node: bpy.types.Node) -> str:
+    """How messages name a node: its label, else its name (``HDR Merge.001``)."""
+    return node.label or node.name
+
+
 class PrivateGroupMixin:
     """A group node whose tree is its own: a copied node gets a copy, a deleted node
     takes its tree along (not decided by ``users``: Blender 5.0 counts 2 users for a tree
@@ -53,7 +71,11 @@ class PrivateGroupMixin:
             bpy.data.node_groups.remove(self.node_tree)
 
 
-def _rebuild_merge(node: HdrioMergeNode, _context=None) -> None:
+def _exposures_changed(node: HdrioMergeNode, _context=None) -> None:
+    if node.as_pointer() not in _FILLING:
+        sources = edited_sources(node.sources(), node.last_exposures, node.exposures)
+        node.exposure_sources = ",".join(sources)
+    node.last_exposures = node.exposures
     node.rebuild()
 
 
@@ -63,12 +85,12 @@ def _resize_merge(node: HdrioMergeNode, _context=None) -> None:
 
 
 class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
-    """Merge bracketed exposures into scene-linear radiance (hdrio's linear merge)."""
+    """Merge bracketed exposures into scene-linear radiance (hdrio's default merge)."""
 
     bl_idname = "CompositorNodeHdrioMerge"
     bl_label = "HDR Merge"
-    bl_description = ("Merge bracketed exposures into scene-linear radiance with a baked "
-                      "camera response (hdrio)")
+    bl_description = ("Merge bracketed exposures into scene-linear radiance as `hdrio merge` "
+                      "does, with a baked camera response")
     bl_width_default = 260
 
     bracket_count: IntProperty(  # type: ignore[valid-type]
@@ -77,7 +99,12 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     exposures: FloatVectorProperty(  # type: ignore[valid-type]
         name="Exposures", description="Exposure of each input (seconds, or relative)",
         size=MAX_BRACKETS, default=DEFAULT_EXPOSURES, min=1e-9, precision=6,
-        update=_rebuild_merge)
+        update=_exposures_changed)
+    last_exposures: FloatVectorProperty(  # type: ignore[valid-type]
+        size=MAX_BRACKETS, default=DEFAULT_EXPOSURES, options={"HIDDEN"})
+    # Where each exposure came from (exposures.PLACEHOLDER, TYPED, or hdrio's source).
+    exposure_sources: StringProperty(  # type: ignore[valid-type]
+        default=",".join([PLACEHOLDER] * MAX_BRACKETS), options={"HIDDEN"})
     response_json: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
     linked_files: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
     message: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
@@ -89,18 +116,43 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
         self.resize_interface()
         self.rebuild()
 
-    @property
-    def baked(self) -> BakedResponse:
-        if self.response_json:
-            return BakedResponse.from_json(self.response_json)
-        return bake_response(linear_response(), label="linear (not solved)")
+    def sources(self) -> list[str]:
+        return self.exposure_sources.split(",")
 
-    def set_response(self, baked: BakedResponse) -> None:
-        self.response_json = baked.to_json()
+    def response_label(self) -> str:
+        if not self.response_json:
+            return UNSOLVED_LABEL
+        return response_from_json(self.response_json)[1]
+
+    def baked(self) -> BakedMerge:
+        """hdrio's merge tables for this node's response and exposures (shortest first)."""
+        if self.response_json:
+            response = response_from_json(self.response_json)[0]
+        else:
+            response = scene_linear_response()
+        return bake_merge(response, sorted(self.bracket_exposures()))
+
+    def set_response(self, response_json: str) -> None:
+        self.response_json = response_json
         self.rebuild()
 
     def bracket_exposures(self) -> list[float]:
         return [float(v) for v in self.exposures[: self.bracket_count]]
+
+    def set_exposures(self, values: list[float], source: str) -> None:
+        """Exposures of the first ``len(values)`` brackets, found by the add-on."""
+        exposures, sources = list(self.exposures), self.sources()
+        exposures[: len(values)] = values
+        sources[: len(values)] = [source] * len(values)
+        self.exposure_sources = ",".join(sources)
+        _FILLING.add(self.as_pointer())
+        try:
+            self.exposures = exposures  # rebuilds
+        finally:
+            _FILLING.discard(self.as_pointer())
+
+    def placeholder_brackets(self) -> list[int]:
+        return placeholder_brackets(self.sources()[: self.bracket_count])
 
     def resize_interface(self) -> None:
         """Give the group exactly ``bracket_count`` inputs (links to kept ones stay)."""
@@ -114,46 +166,82 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
                                  socket_type="NodeSocketColor")
 
     def rebuild(self) -> None:
-        build_merge_graph(self.node_tree, self.baked, self.bracket_exposures())
+        build_merge_graph(self.node_tree, self.baked(), self.bracket_exposures())
 
     def bracket_images(self) -> list[bpy.types.Image | None]:
         return [linked_image(socket) for socket in self.inputs[: self.bracket_count]]
 
+    def check_inputs(self) -> str:
+        """The first problem with the linked inputs (on the node and the status bar)."""
+        sizes = [None if image is None else tuple(image.size)
+                 for image in self.bracket_images()]
+        linked = [socket.is_linked for socket in self.inputs[: self.bracket_count]]
+        return input_problems(sizes, linked)
+
     def update(self) -> None:
-        """On new links: read the brackets as code values and fill their exposures."""
+        """On new links: read the brackets as code values, fill their exposures, and say
+        what is wrong with the inputs."""
         images = self.bracket_images()
         for image in images:
             if image is not None and image.colorspace_settings.name != "Non-Color":
                 image.colorspace_settings.name = "Non-Color"
+        problem = self.check_inputs()
+        self.message = problem
+        show_status(f"HDR Merge \"{merge_node_name(self)}\": {problem}" if problem else "",
+                    owner=self.as_pointer())
         paths = [image_path(image) for image in images]
         signature = "\n".join(path or "" for path in paths)
-        if signature == self.linked_files or not all(paths):
+        if problem or signature == self.linked_files or not all(paths):
             return
         self.linked_files = signature
         try:
-            values = exposures_for_files(paths)
-        except HdrioError as error:
-            self.message = f"exposures not read: {error}"
+            values, source = exposures_for_files(paths)
+        except InputError as error:
+            if "no exposure time" not in error.problem:
+                self.message = f"{bpy.path.basename(error.path)}: {error.problem}"
             return
-        self.message = ""
-        exposures = list(self.exposures)
-        exposures[: len(values)] = values
-        self.exposures = exposures  # rebuilds
+        except HdrioError as error:
+            self.message = str(error)
+            return
+        self.set_exposures(values, source)
 
     def draw_buttons(self, context, layout) -> None:
         layout.prop(self, "bracket_count")
+        missing = set(self.placeholder_brackets())
         column = layout.column(align=True)
         for index in range(self.bracket_count):
-            column.prop(self, "exposures", index=index, text=f"Bracket {index + 1} (s)")
-        layout.label(text=f"Response: {self.baked.label}")
+            row = column.row(align=True)
+            row.alert = index + 1 in missing
+            row.prop(self, "exposures", index=index, text=f"Bracket {index + 1} (s)")
+        state = exposure_state(self.sources()[: self.bracket_count])
+        layout.label(text=state, icon="ERROR" if missing else "CHECKMARK")
+        layout.label(text=f"Response: {self.response_label()}")
         if self.message:
             layout.label(text=self.message, icon="ERROR")
         layout.context_pointer_set("node", self)
         layout.operator("hdrio.solve_response", icon="GRAPH")
 
 
-def _rebuild_reinhard(node: HdrioReinhardGlobalNode, _context=None) -> None:
-    build_reinhard_global_graph(node.node_tree)
+def view_warning(scene: bpy.types.Scene) -> str:
+    """What is wrong with showing the Reinhard node's output under ``scene``'s view."""
+    view = scene.view_settings.view_transform
+    if view == DISPLAY_VIEW:
+        return ""
+    return f"{view} view tone-maps it again"
+
+
+@bpy.app.handlers.persistent
+def refresh_curves(*_arguments) -> None:
+    """After a file is loaded (``load_post``): recompute the hdrio nodes' curve tables.
+
+    Blender rebuilds a curve's table from its points lazily; a file saved and opened
+    again must not render with stale tables (Blender 4.2 did, from the second open).
+    """
+    for tree in bpy.data.node_groups:
+        if tree.name.startswith(".hdrio"):
+            for node in tree.nodes:
+                if node.bl_idname == "CompositorNodeCurveRGB":
+                    node.mapping.update()
 
 
 class HdrioReinhardGlobalNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
@@ -162,7 +250,8 @@ class HdrioReinhardGlobalNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomG
     bl_idname = "CompositorNodeHdrioReinhardGlobal"
     bl_label = "Reinhard Global"
     bl_description = ("Reinhard 2002 global tone mapping (log-average key from the "
-                      "compositor's image statistics); display-linear output in [0, 1]")
+                      "compositor's image statistics); display-linear output in [0, 1], "
+                      "to be viewed with the Standard view")
     bl_width_default = 200
 
     def init(self, context) -> None:
@@ -172,6 +261,12 @@ class HdrioReinhardGlobalNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomG
         # A new node's sockets start at 0, not at the interface's defaults.
         self.inputs["Key"].default_value = DEFAULT_KEY
         self.inputs["Saturation"].default_value = DEFAULT_SATURATION
+
+    def draw_buttons(self, context, layout) -> None:
+        warning = view_warning(context.scene)
+        if warning:
+            layout.label(text=warning, icon="ERROR")
+            layout.operator("hdrio.use_standard_view", icon="CHECKMARK")
 
 
 CLASSES = (HdrioMergeNode, HdrioReinhardGlobalNode)

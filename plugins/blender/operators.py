@@ -14,14 +14,27 @@ import bpy
 import numpy as np
 from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
-from hdrio.errors import HdrioError
+from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.pipeline import MergeOptions, merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
 
-from .baking import bake_response
+from .baking import response_to_json
 from .compat import active_compositor_tree, compositor_tree, find_node_tree
-from .nodes import HdrioMergeNode, image_path
+from .nodes import DISPLAY_VIEW, HdrioMergeNode, image_path, merge_node_name
+from .warmup import WARMUP
+
+
+def kernels_ready(operator: bpy.types.Operator) -> bool:
+    """True once hdrio's kernels are compiled (:mod:`.warmup`). In the background (no UI
+    to freeze) wait for them; with a UI, say so and let the user retry."""
+    if not WARMUP.running:
+        return True
+    if bpy.app.background:
+        WARMUP.wait()
+        return True
+    operator.report({"WARNING"}, f"{WARMUP.status()}: try again in a few seconds")
+    return False
 
 
 def _merge_node(context, tree_name: str, node_name: str) -> HdrioMergeNode | None:
@@ -49,22 +62,33 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
         if node is None:
             self.report({"ERROR"}, "no HDR Merge node selected")
             return {"CANCELLED"}
+        name = merge_node_name(node)
         paths = [image_path(image) for image in node.bracket_images()]
         if not all(paths):
             missing = next(i for i, path in enumerate(paths, start=1) if not path)
-            self.report({"ERROR"}, f"HDR Merge: bracket {missing} is not linked to an image "
-                                   "file; the solve reads the brackets' files")
+            self.report({"ERROR"}, f"HDR Merge \"{name}\": bracket {missing} is not linked to "
+                                   "an image file; the solve reads the brackets' files")
             return {"CANCELLED"}
-        options = MergeOptions(merge="linear")
+        placeholders = node.placeholder_brackets()
+        if placeholders:
+            first = placeholders[0]
+            which = ", ".join(str(n) for n in placeholders)
+            self.report({"ERROR"}, f"HDR Merge \"{name}\": no exposure for bracket {which} "
+                                   f"(no EXIF, no time in the file name): type it in the "
+                                   f"node's \"Bracket {first} (s)\" field, then Solve again")
+            return {"CANCELLED"}
+        if not kernels_ready(self):
+            return {"CANCELLED"}
+        # hdrio merge's defaults, so the baked node merges as `hdrio merge` does.
+        options = MergeOptions()
         try:
             stack = read_brackets(paths, exposures=node.bracket_exposures())
             result = merge_stack(stack, options)
         except HdrioError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        node.set_response(bake_response(
-            result.response, options.weighting,
-            label=f"{result.response.method} from {len(paths)} brackets"))
+        node.set_response(response_to_json(
+            result.response, f"{result.response.method} from {len(paths)} brackets"))
         self.report({"INFO"}, f"response solved from {len(paths)} brackets")
         return {"FINISHED"}
 
@@ -82,6 +106,14 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
     output: StringProperty(  # type: ignore[valid-type]
         name="Output", subtype="FILE_PATH",
         description="EXR to write (default: merged.exr beside the brackets)")
+    exposures: StringProperty(  # type: ignore[valid-type]
+        name="Exposures",
+        description="Exposure of each selected file in seconds, in the order of the file "
+                    "names, as `hdrio merge --exposures` (e.g. 1/8 1 8); empty: from the "
+                    "files' EXIF or names")
+    overwrite: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Overwrite", default=False, options={"SKIP_SAVE"},
+        description="Replace the output EXR if it exists")
     filter_image: bpy.props.BoolProperty(default=True, options={"HIDDEN"})  # type: ignore
 
     def invoke(self, context, event):
@@ -89,7 +121,8 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        paths = [os.path.join(self.directory, item.name) for item in self.files if item.name]
+        paths = sorted(os.path.join(self.directory, item.name)
+                       for item in self.files if item.name)
         if len(paths) < 2:
             self.report({"ERROR"}, "select at least two bracketed images")
             return {"CANCELLED"}
@@ -98,8 +131,23 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         if output.suffix.lower() != ".exr":
             self.report({"ERROR"}, f"{output}: the output must be an .exr file")
             return {"CANCELLED"}
+        if output.exists() and not self.overwrite:
+            self.report({"ERROR"}, f"{output} exists: tick Overwrite (in the file browser's "
+                                   "side panel) to replace it, or choose another Output")
+            return {"CANCELLED"}
+        if not kernels_ready(self):
+            return {"CANCELLED"}
+        exposures = self.exposures.replace(",", " ").split() or None
         try:
-            merge_files(paths, output, options=MergeOptions())
+            merge_files(paths, output, exposures=exposures, options=MergeOptions())
+        except InputError as error:
+            if "no exposure time" in error.problem:  # hdrio's words name a CLI option
+                self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "
+                                       "in the file name): type them in Exposures, in the "
+                                       "file browser's side panel (e.g. 1/8 1 8)")
+            else:
+                self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
         except HdrioError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -136,6 +184,8 @@ class HDRIO_OT_tonemap_local(bpy.types.Operator):
         if width * height == 0:
             self.report({"ERROR"}, f"{image.filepath or image.name}: image has no pixels")
             return {"CANCELLED"}
+        if not kernels_ready(self):
+            return {"CANCELLED"}
         pixels = np.empty(width * height * 4, dtype=np.float32)
         image.pixels.foreach_get(pixels)
         rgba = pixels.reshape(height, width, 4)
@@ -146,6 +196,23 @@ class HDRIO_OT_tonemap_local(bpy.types.Operator):
         result.pixels.foreach_set(out.astype(np.float32).reshape(-1))
         result.update()
         self.report({"INFO"}, f"tone-mapped {image.name} into {result.name}")
+        return {"FINISHED"}
+
+
+class HDRIO_OT_use_standard_view(bpy.types.Operator):
+    """Show the compositor's result with the Standard view: the Reinhard node's output is
+    already tone-mapped (display-linear), and the default AgX view would tone-map it again"""
+
+    bl_idname = "hdrio.use_standard_view"
+    bl_label = "Use Standard View"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        settings = context.scene.view_settings
+        previous = settings.view_transform
+        settings.view_transform = DISPLAY_VIEW
+        settings.look = "None"
+        self.report({"INFO"}, f"view transform {previous} -> {DISPLAY_VIEW}")
         return {"FINISHED"}
 
 
@@ -172,4 +239,4 @@ class HDRIO_OT_add_node(bpy.types.Operator):
 
 
 CLASSES = (HDRIO_OT_solve_response, HDRIO_OT_merge_to_exr, HDRIO_OT_tonemap_local,
-           HDRIO_OT_add_node)
+           HDRIO_OT_use_standard_view, HDRIO_OT_add_node)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 
 from .nodes import HdrioMergeNode
+from .warmup import WARMUP
 
 
 class HDRIO_PT_compositor(bpy.types.Panel):
@@ -19,6 +20,8 @@ class HDRIO_PT_compositor(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        if WARMUP.running or WARMUP.error:
+            layout.label(text=WARMUP.status(), icon="ERROR" if WARMUP.error else "TIME")
         column = layout.column(align=True)
         column.operator("hdrio.add_node", text="HDR Merge").node_type = (
             "CompositorNodeHdrioMerge")

@@ -67,8 +67,17 @@ def merge_node_with(tree: bpy.types.NodeTree, paths) -> bpy.types.Node:
     return node
 
 
+def solved_merge_node(tree: bpy.types.NodeTree, paths) -> bpy.types.Node:
+    """:func:`merge_node_with` after Solve Camera Response (which must succeed)."""
+    node = merge_node_with(tree, paths)
+    assert node.placeholder_brackets() == []
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+    return node
+
+
 def assert_matches_merge(label: str, merged: np.ndarray, reference: np.ndarray) -> None:
-    """The HDR Merge node's render against hdrio's linear merge of the same brackets."""
+    """The HDR Merge node's render against hdrio's merge of the same brackets."""
     difference = relative_difference(merged, reference)
     print(f"{label}: median {np.median(difference):.2e} "
           f"p99 {np.percentile(difference, 99):.2e} max {difference.max():.2e}")

@@ -7,6 +7,7 @@ Kept out of pytest's process on purpose: the test environment has hdrio installe
 this must prove the zip brings hdrio and its dependencies itself.
 """
 
+import importlib
 import json
 import sys
 from pathlib import Path
@@ -40,5 +41,10 @@ node.update()
 result["exposures"] = node.bracket_exposures()
 result["solve"] = sorted(bpy.ops.hdrio.solve_response(tree_name=tree.name,
                                                        node_name=node.name))
-result["response"] = node.baked.label
+result["response"] = node.response_label()
+merged = bpy.data.images.load(output)
+result["tonemap"] = sorted(bpy.ops.hdrio.tonemap_local(image_name=merged.name))
+warmup = importlib.import_module("bl_ext.user_default.hdrio.warmup").WARMUP
+result["warmup"] = [warmup.finished, warmup.error]
+result["not_shipped_imported"] = [name for name in ("PIL", "imageio") if name in sys.modules]
 print("RESULT " + json.dumps(result))

@@ -19,6 +19,7 @@ from blender_scene import (  # noqa: E402
     merge_node_with,
     relative_difference,
     render_to_exr,
+    solved_merge_node,
 )
 
 import plugins.blender as addon  # noqa: E402
@@ -28,6 +29,8 @@ from hdrio.io.write import write_exr  # noqa: E402
 from hdrio.pipeline import MergeOptions, merge_stack  # noqa: E402
 from hdrio.synthetic import demo_scene  # noqa: E402
 from hdrio.tonemap import TONEMAP_METHODS  # noqa: E402
+from plugins.blender.compat import compositor_tree  # noqa: E402
+from plugins.blender.nodes import refresh_curves, view_warning  # noqa: E402
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -51,32 +54,82 @@ def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     paths = write_brackets(size=size)
     scene = bpy.context.scene
     tree = clean_compositor(scene)
-    node = merge_node_with(tree, paths)
-    before = node.response_json
-    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
-        "FINISHED"}
+    before = tree.nodes.new("CompositorNodeHdrioMerge").response_json
+    node = solved_merge_node(tree, paths)
     assert node.response_json != before
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
 
-    reference = merge_stack(read_brackets(paths), MergeOptions(merge="linear")).radiance
+    reference = merge_stack(read_brackets(paths), MergeOptions()).radiance
     assert_matches_merge("solved", merged, reference)
 
 
-def test_merge_node_matches_hdrio_on_real_brackets(shared_data, tmp_path):
+def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tmp_path):
     # Real JPEGs: the solved response has codes no sample fell on (red code 83 here),
     # which hdrio's merge gives no weight; the node must reproduce these one-code notches.
     paths = sorted(shared_data("frobisher_001").glob("*.jpg"))
     scene = bpy.context.scene
-    tree = clean_compositor(scene)
-    node = merge_node_with(tree, paths)
+    node = solved_merge_node(clean_compositor(scene), paths)
     assert node.bracket_exposures() == pytest.approx([1 / 8, 1.0, 8.0])  # from EXIF
-    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
-        "FINISHED"}
-    result = merge_stack(read_brackets(paths), MergeOptions(merge="linear"))
+    result = merge_stack(read_brackets(paths), MergeOptions())
     assert not np.all(result.response.supported[1:-1])  # the case this test is about
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
                            result.radiance.shape[:2])
     assert_matches_merge("frobisher", merged, result.radiance)
+
+    # The acceptance: against the EXR `hdrio merge` writes with its defaults (half
+    # floats, and a power-of-two scale if its range needs one), after one global scale.
+    command = tmp_path / "cli.exr"
+    assert hdrio_main(["merge", *map(str, paths), "-o", str(command), "-q"]) == 0
+    written, _ = read_exr(command)
+    written = written[..., :3].astype(np.float64)
+    scale = np.median(written / merged)
+    difference = relative_difference(merged * scale, written)
+    print(f"frobisher against hdrio merge: scale {scale:.6g}, "
+          f"p99 {np.percentile(difference, 99):.1e}, max {difference.max():.1e}")
+    assert np.percentile(difference, 99) <= 1e-3  # half's 11-bit mantissa is 4.9e-4
+
+
+def test_solve_refuses_placeholder_exposures_in_one_line(write_brackets):
+    # PNGs without EXIF and names without times: the node's exposures are placeholders.
+    paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
+    tree = clean_compositor(bpy.context.scene)
+    node = merge_node_with(tree, paths)
+    node.label = "Church"
+    before = node.response_json
+    with pytest.raises(RuntimeError) as refused:
+        bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name)
+    message = str(refused.value).strip()
+    print(message)
+    assert "\n" not in message
+    assert ('HDR Merge "Church": no exposure for bracket 1, 2, 3 (no EXIF, no time in the '
+            'file name): type it in the node\'s "Bracket 1 (s)" field') in message
+    assert node.response_json == before
+    node.exposures[0], node.exposures[1] = 0.25, 1.0
+    with pytest.raises(RuntimeError, match="no exposure for bracket 3 "):
+        bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name)
+    node.exposures[2] = 4.0
+    assert node.placeholder_brackets() == []
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+
+
+def test_saved_file_reopened_twice_renders_the_same_pixels(write_brackets, tmp_path):
+    size = (40, 96)
+    paths = write_brackets(size=size)
+    scene = bpy.context.scene
+    node = solved_merge_node(clean_compositor(scene), paths)
+    name = node.name
+    first = render_to_exr(scene, node.outputs[0], tmp_path / "before.exr", size)
+    blend = tmp_path / "merge.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    for attempt in range(2):
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        assert refresh_curves in bpy.app.handlers.load_post  # persistent: kept
+        scene = bpy.context.scene
+        node = compositor_tree(scene).nodes[name]
+        again = render_to_exr(scene, node.outputs[0], tmp_path / f"reopened{attempt}.exr",
+                              size)
+        assert np.array_equal(again, first), f"open {attempt + 1}"
 
 
 def test_solve_without_linked_images_reports_an_error():
@@ -98,6 +151,12 @@ def test_reinhard_global_node_matches_hdrio(tmp_path):
 
     reference = TONEMAP_METHODS["reinhard-global"](radiance)
     difference = relative_difference(display, reference)
+    # Its output is display-linear: under AgX it would be tone-mapped twice.
+    scene.view_settings.view_transform = "AgX"
+    assert view_warning(scene) == "AgX view tone-maps it again"
+    assert bpy.ops.hdrio.use_standard_view() == {"FINISHED"}
+    assert scene.view_settings.view_transform == "Standard"
+    assert view_warning(scene) == ""
     print(f"reinhard: median {np.median(difference):.2e} p99 "
           f"{np.percentile(difference, 99):.2e}")
     # The issue's bound; float32 statistics and Blender's luminance path differ from
@@ -129,15 +188,33 @@ def test_merge_to_exr_matches_hdrio_merge_command(shared_data, tmp_path):
     loaded = [n for n in tree.nodes if n.bl_idname == "CompositorNodeImage"]
     assert [bpy.path.abspath(n.image.filepath) for n in loaded] == [str(blender_output)]
 
+    # Asked again, it does not overwrite silently.
+    stamp = blender_output.stat().st_mtime_ns
+    with pytest.raises(RuntimeError, match="blender.exr exists: tick Overwrite"):
+        bpy.ops.hdrio.merge_to_exr(
+            directory=str(folder), files=[{"name": name} for name in names],
+            output=str(blender_output))
+    assert blender_output.stat().st_mtime_ns == stamp
+    assert bpy.ops.hdrio.merge_to_exr(
+        directory=str(folder), files=[{"name": name} for name in names],
+        output=str(blender_output), overwrite=True) == {"FINISHED"}
 
-def test_merge_to_exr_reports_bad_input(write_brackets, tmp_path):
+
+def test_merge_to_exr_reports_bad_input_in_blender_words(write_brackets, tmp_path):
     # Names without exposures, and PNGs without EXIF: nothing gives the exposures.
     paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
-    with pytest.raises(RuntimeError, match="a.png: no exposure time"):
-        bpy.ops.hdrio.merge_to_exr(
-            directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
-            output=str(tmp_path / "out.exr"))
+    arguments = dict(directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+                     output=str(tmp_path / "out.exr"))
+    with pytest.raises(RuntimeError, match="a.png: no exposure time .*type them in "
+                                           "Exposures") as refused:
+        bpy.ops.hdrio.merge_to_exr(**arguments)
+    assert "--exposures" not in str(refused.value)
     assert not (tmp_path / "out.exr").exists()
+    # The same option as `hdrio merge --exposures`, in the same words.
+    assert bpy.ops.hdrio.merge_to_exr(**arguments, exposures="1/4, 1 4") == {"FINISHED"}
+    _, attributes = read_exr(tmp_path / "out.exr")
+    assert attributes["hdrio:exposures"] == ("0.25", "1.0", "4.0")
+    assert attributes["hdrio:exposureSource"] == "explicit"
 
 
 def test_tonemap_local_operator_matches_hdrio(tmp_path):
