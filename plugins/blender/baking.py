@@ -5,8 +5,10 @@ exposures and hdrio's :class:`~hdrio.pipeline.MergeOptions` into plain arrays, s
 tested without Blender.
 
 The tables come from hdrio's own merge (:func:`hdrio.merge.debevec1997.merge_tables`,
-the kernel's interface): per bracket ``j``, channel ``c`` and code ``z``, the weight
-``w_j(z)`` and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear domain, ``g(z) -
+the kernel's interface, with the weights of the options' estimator,
+:func:`hdrio.merge.estimators.effective_weights`): per bracket ``j``, channel ``c`` and
+code ``z``, the weight ``w_j(z)`` (the inverse-variance weights of the noise model the
+Solve fitted, by default) and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear domain, ``g(z) -
 ln dt_j`` in the log domain). Whatever weights and domain the options name, the node
 follows: it computes ``sum_j w_j x_j / sum_j w_j`` (then ``exp`` in the log domain) with
 the core's saturation reset and fallback (``merge_graph.py``).
@@ -24,7 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hdrio.merge.debevec1997 import MERGE_METHODS, merge_tables
+from hdrio.merge.debevec1997 import merge_tables
+from hdrio.merge.estimators import MERGE_METHODS, NOISE_AWARE, effective_weights, merge_domain
+from hdrio.merge.noise import NoiseModel
 from hdrio.pipeline import MergeOptions
 from hdrio.response.curve import CameraResponse
 from hdrio.response.linear import linear_response
@@ -120,7 +124,7 @@ class BakedMerge:
 
 def bake_merge(response: CameraResponse, exposures: Sequence[float],
                options: MergeOptions | None = None,
-               points: int = CURVE_POINTS) -> BakedMerge:
+               points: int = CURVE_POINTS, noise: NoiseModel | None = None) -> BakedMerge:
     """hdrio's merge tables for brackets of ``exposures`` (shortest first), sampled at
     ``points`` codes for the HDR Merge node.
 
@@ -137,6 +141,10 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
         defaults.
     points
         Curve points (at least 2); with ``code_max + 1`` or more, every code is a point.
+    noise
+        The noise model the noise-aware estimators weigh by (the one ``merge_stack``
+        fitted when the node was solved); ``None``: rounding of the codes alone (an
+        unsolved node, e.g. a render pass).
     """
     if points < 2:
         raise ValueError(f"a curve needs at least 2 points, not {points}")
@@ -144,11 +152,12 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
     exposures = np.asarray(exposures, dtype=np.float64)
     if np.any(np.diff(exposures) < 0):
         raise ValueError("exposures must be given shortest first")
-    domain = MERGE_METHODS.canonical(options.merge)
-    if domain not in ("log", "linear"):  # a new merge method: its tables go here
-        raise ValueError(f"the HDR Merge node bakes the 'log' and 'linear' merges, not "
-                         f"{options.merge!r}: teach plugins/blender/baking.py its tables")
-    terms, estimates = merge_tables(response, exposures, options.weighting, domain)
+    method = MERGE_METHODS.canonical(options.merge)
+    if method in NOISE_AWARE and noise is None:
+        noise = NoiseModel.quantisation_only(response.channels)
+    domain = merge_domain(method)
+    weights = effective_weights(method, response, exposures, options.weighting, noise)
+    terms, estimates = merge_tables(response, exposures, options.weighting, domain, weights)
     code_max = int(response.code_max)
     count = min(points, code_max + 1)
     codes = np.unique(np.rint(np.linspace(0.0, code_max, count)).astype(np.int64))
@@ -177,19 +186,32 @@ def scene_linear_response(code_max: int = 255) -> CameraResponse:
                           method="linear", parameters=dict(linear.parameters))
 
 
-def response_to_json(response: CameraResponse, label: str) -> str:
-    """What the node stores of a solved response (its tables are baked from it)."""
-    return json.dumps({
+def response_to_json(response: CameraResponse, label: str,
+                     noise: NoiseModel | None = None) -> str:
+    """What the node stores of a solved response and its noise model (its tables are
+    baked from them)."""
+    data = {
         "log_inverse": response.log_inverse.tolist(), "supported": response.supported.tolist(),
         "code_max": int(response.code_max), "method": response.method, "label": label,
-    })
+    }
+    if noise is not None:
+        data["noise"] = {"shot": np.asarray(noise.shot).tolist(),
+                         "read": np.asarray(noise.read).tolist(),
+                         "code": np.asarray(noise.code).tolist(), "source": noise.source}
+    return json.dumps(data)
 
 
-def response_from_json(text: str) -> tuple[CameraResponse, str]:
-    """The response and its label stored by :func:`response_to_json`."""
+def response_from_json(text: str) -> tuple[CameraResponse, str, NoiseModel | None]:
+    """The response, its label and its noise model (``None`` in a file saved before the
+    node stored one) stored by :func:`response_to_json`."""
     data = json.loads(text)
     response = CameraResponse(np.asarray(data["log_inverse"], dtype=np.float64),
                               int(data["code_max"]),
                               np.asarray(data["supported"], dtype=bool),
                               method=str(data["method"]))
-    return response, str(data["label"])
+    noise = data.get("noise")
+    if noise is not None:
+        noise = NoiseModel(np.asarray(noise["shot"], dtype=np.float64),
+                           np.asarray(noise["read"], dtype=np.float64),
+                           np.asarray(noise["code"], dtype=np.float64), str(noise["source"]))
+    return response, str(data["label"]), noise

@@ -127,10 +127,10 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     def baked(self) -> BakedMerge:
         """hdrio's merge tables for this node's response and exposures (shortest first)."""
         if self.response_json:
-            response = response_from_json(self.response_json)[0]
+            response, _, noise = response_from_json(self.response_json)
         else:
-            response = scene_linear_response()
-        return bake_merge(response, sorted(self.bracket_exposures()))
+            response, noise = scene_linear_response(), None
+        return bake_merge(response, sorted(self.bracket_exposures()), noise=noise)
 
     def set_response(self, response_json: str) -> None:
         self.response_json = response_json

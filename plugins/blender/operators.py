@@ -88,7 +88,8 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         node.set_response(response_to_json(
-            result.response, f"{result.response.method} from {len(paths)} brackets"))
+            result.response, f"{result.response.method} from {len(paths)} brackets",
+            result.noise))
         self.report({"INFO"}, f"response solved from {len(paths)} brackets")
         return {"FINISHED"}
 

@@ -11,6 +11,7 @@ import pytest
 
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_brackets
+from hdrio.merge.noise import NoiseModel
 from hdrio.pipeline import MergeOptions, merge_stack
 from hdrio.response.curve import CameraResponse
 from plugins.blender.baking import (
@@ -82,8 +83,9 @@ def node_merge(codes: np.ndarray, baked) -> np.ndarray:
     return np.exp(merged) if baked.log_domain else merged
 
 
-def assert_node_is_hdrio_merge(label, codes, exposures, response, reference):
-    baked = bake_merge(response, exposures)  # MergeOptions(): hdrio merge's defaults
+def assert_node_is_hdrio_merge(label, codes, exposures, response, reference, noise):
+    # MergeOptions(): hdrio merge's defaults, with the noise model the merge fitted
+    baked = bake_merge(response, exposures, noise=noise)
     difference = np.abs(node_merge(codes, baked) / reference - 1.0)
     print(f"{label}: median {np.median(difference):.1e} max {difference.max():.1e}")
     # float32 curves (2^-24 relative of each table's span) and float32 sums against the
@@ -97,7 +99,7 @@ def test_baked_tables_are_hdrio_default_merge_on_synthetic_brackets(write_bracke
     stack = read_brackets(paths)
     result = merge_stack(stack, MergeOptions())
     assert_node_is_hdrio_merge("synthetic", stack.codes, stack.exposures, result.response,
-                               result.radiance)
+                               result.radiance, result.noise)
 
 
 def test_baked_tables_are_hdrio_default_merge_on_frobisher(shared_data):
@@ -106,17 +108,18 @@ def test_baked_tables_are_hdrio_default_merge_on_frobisher(shared_data):
     result = merge_stack(stack, MergeOptions())
     assert not np.all(result.response.supported[1:-1])  # single codes without weight
     assert_node_is_hdrio_merge("frobisher", stack.codes, stack.exposures, result.response,
-                               result.radiance)
+                               result.radiance, result.noise)
 
 
 @pytest.mark.parametrize("merge, saturation", [("log", "channel"), ("linear", "channel"),
-                                               ("log", "pixel")])
+                                               ("log", "pixel"), ("Poisson", "channel"),
+                                               ("inverse-variance", "pixel")])
 def test_baked_tables_follow_the_options(write_brackets, merge, saturation):
     paths = write_brackets((1 / 16, 1 / 4, 1.0, 4.0), size=(40, 96))
     stack = read_brackets(paths)
     options = MergeOptions(merge=merge, saturation=saturation)
     result = merge_stack(stack, options)
-    baked = bake_merge(result.response, stack.exposures, options)
+    baked = bake_merge(result.response, stack.exposures, options, noise=result.noise)
     assert baked.log_domain == (merge == "log")
     assert baked.per_channel == (saturation == "channel")
     difference = np.abs(node_merge(stack.codes, baked) / result.radiance - 1.0)
@@ -167,10 +170,17 @@ def test_scene_linear_response_gives_a_pass_back_at_its_scale():
 
 def test_response_json_round_trip():
     response = smooth_response()
-    again, label = response_from_json(response_to_json(response, "from test"))
+    again, label, noise = response_from_json(response_to_json(response, "from test"))
     assert np.array_equal(again.log_inverse, response.log_inverse)
     assert np.array_equal(again.supported, response.supported)
-    assert (again.code_max, again.method, label) == (255, response.method, "from test")
+    assert (again.code_max, again.method, label, noise) == (255, response.method,
+                                                           "from test", None)
+    fitted = NoiseModel(np.array([1e-4, 2e-4, 3e-4]), np.array([1e-7, 0.0, 2e-7]),
+                        np.array([1 / 12, 0.5, 4.0]), "fitted")
+    _, _, noise = response_from_json(response_to_json(response, "noisy", fitted))
+    for name in ("shot", "read", "code"):
+        assert np.array_equal(getattr(noise, name), getattr(fitted, name))
+    assert noise.source == "fitted"
 
 
 def test_exposures_follow_the_files_order(write_brackets):
@@ -280,13 +290,3 @@ def test_warmup_steps_compile_hdrio_kernels():
     warmup = KernelWarmup()
     warmup.start()
     assert warmup.wait(600) and not warmup.error, warmup.error
-
-
-def test_bake_refuses_a_merge_method_it_has_no_tables_for(monkeypatch):
-    # A new default merge that merge_tables' two domains cannot express fails loudly
-    # here (and in the main suite), rather than baking the wrong node.
-    from plugins.blender import baking
-
-    monkeypatch.setattr(baking.MERGE_METHODS, "canonical", lambda name: "poisson")
-    with pytest.raises(ValueError, match="bakes the 'log' and 'linear' merges, not 'log'"):
-        bake_merge(smooth_response(), [1.0, 2.0])
