@@ -20,3 +20,7 @@ class InputError(HdrioError):
 
 class ResponseSolveError(HdrioError):
     """The samples do not determine a camera response (say why and what to do)."""
+
+
+class OutputError(HdrioError):
+    """An output cannot be written (the message names the file and the reason)."""

@@ -27,6 +27,7 @@ def _set_outputs(steps: list[Step], fields: dict[str, str]) -> list[Path]:
 def _plan_sets(chain: Chain, rest: list[Step]) -> list[tuple[int, Any, list[Path], str]]:
     """``(index, set, outputs, status)`` per set; status ``merge`` or why it is skipped."""
     from hdrio.grouping import group_brackets, output_is_complete
+    from hdrio.io.paths import check_output
 
     if not chain.brackets:
         raise ChainError("no brackets to group: give a folder or files before --group")
@@ -36,6 +37,8 @@ def _plan_sets(chain: Chain, rest: list[Step]) -> list[tuple[int, Any, list[Path
     plan = []
     for index, bracket_set in enumerate(group_brackets(chain.brackets), start=1):
         outputs = _set_outputs(rest, bracket_set.fields(index))
+        for output in outputs:  # a pattern naming an input is not a finished output
+            check_output(output, bracket_set.files, writable=False)
         if len(bracket_set.frames) < 2:
             status = "skip: a single frame is not a bracket set"
         elif outputs and all(output_is_complete(o, bracket_set.files) for o in outputs):

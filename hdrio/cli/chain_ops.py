@@ -39,14 +39,16 @@ def _number(values: list[str]) -> float:
 def read_input(chain: Chain, path: Path) -> None:
     """A positional input: brackets wait for --merge; float images go on the stack."""
     from hdrio.grouping import list_images
+    from hdrio.io.paths import check_input, name_too_long
 
-    if path.is_dir():
+    if not name_too_long(path) and path.is_dir():
         files = list_images(path)
         if not files:
             raise ChainError(f"{path}: folder holds no images")
         chain.brackets.extend(files)
         chain.inputs.extend(files)
         return
+    check_input(path)
     chain.inputs.append(path)
     if path.suffix.lower() in FLOAT_SUFFIXES:
         from hdrio.imageops import read_image

@@ -23,6 +23,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
+from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
 from hdrio.skips import classify
@@ -95,8 +96,7 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
     """
     import OpenImageIO as oiio
 
-    if not path.is_file():
-        raise InputError(path, "no such file")
+    check_input(path)
     with _quiet_native_stderr():
         # Keep stored values: never let a reader premultiply RGB by a translucent alpha.
         config = oiio.ImageSpec()
@@ -224,6 +224,7 @@ def read_brackets(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("<no input>", "no images given")
+    check_inputs(paths)  # every name, before any header is read
     raw = [is_raw(path) for path in paths]
     if any(raw) and not all(raw):
         raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from hdrio.errors import InputError
+from hdrio.io.paths import check_input
 
 
 def read_header(path: str | Path) -> dict[str, object]:
@@ -12,8 +13,7 @@ def read_header(path: str | Path) -> dict[str, object]:
     import OpenImageIO as oiio
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "no such file")
+    check_input(path)
     image = oiio.ImageInput.open(str(path))
     if image is None:
         raise InputError(path, f"cannot read header ({oiio.geterror().strip()})")
