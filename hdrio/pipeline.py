@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
+from hdrio.errors import ResponseSolveError
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
@@ -24,8 +25,9 @@ from hdrio.io.paths import check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
+from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
 from hdrio.response import RESPONSE_METHODS, CameraResponse
-from hdrio.response.stored import read_response
+from hdrio.response.stored import check_response_fits, read_response
 from hdrio.skips import SKIPS, SkipReport, classify
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
@@ -65,6 +67,9 @@ class MergeOptions:
     # Names in hdrio.skips.SKIPS turned off (all on by default).
     no_skip: tuple[str, ...] = ()
 
+    def __post_init__(self) -> None:
+        check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
+
     @property
     def skips(self) -> frozenset[str]:
         """The skips (:mod:`hdrio.skips`) in force."""
@@ -87,6 +92,24 @@ class MergeResult:
     def dynamic_range_stops(self) -> tuple[float, float]:
         """``(full, robust)``: log2 of max/min luminance, and of its 99.9/0.1 percentiles."""
         return dynamic_range_stops(luminance(self.radiance, self.options.colourspace))
+
+
+def describe_set(stack: ExposureStack) -> str:
+    """The files of a stack for a message: ``a.png .. d.png (4 brackets, 32x24, all
+    dark: a.png)``, with the brackets that have no well-exposed pixel named."""
+    height, width = stack.shape[:2]
+    names = [Path(name).name for name in stack.files]
+    span = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]}"
+    notes = [f"{len(names)} brackets of {width}x{height}"]
+    dropped = [Path(name).name for name, _ in stack.dropped]
+    if dropped:
+        notes.append(f"no well-exposed pixel in {', '.join(dropped)}")
+    kinds = [classify(codes, stack.code_max) for codes in stack.codes]
+    for kind, label in (("dark", "all dark"), ("bright", "all bright")):
+        which = [name for name, k in zip(names, kinds) if k == kind]
+        if which:
+            notes.append(f"{label}: {', '.join(which)}")
+    return f"{span} ({'; '.join(notes)})"
 
 
 def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.ndarray | None:
@@ -114,16 +137,26 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     skipped = SkipReport(dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
-    if response is None:
+    if response is not None:
+        check_response_fits(response, stack.code_max, stack.shape[2])
+    else:
         method = "linear" if is_raw_stack(stack) else options.response
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
-        response = RESPONSE_METHODS[method](
-            stack, smoothing=options.smoothing, weighting=options.weighting,
-            sampling=options.sampling, samples=options.samples,
-            exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
-            **({"solve_identical_once": "channels" in skips} if method != "linear" else {}),
-        )
+        try:
+            response = RESPONSE_METHODS[method](
+                stack, smoothing=options.smoothing, weighting=options.weighting,
+                sampling=options.sampling, samples=options.samples,
+                exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
+                **({"solve_identical_once": "channels" in skips} if method != "linear"
+                   else {}),
+            )
+        except ResponseSolveError as error:
+            message = str(error).replace("a saved response", "a saved response "
+                                         "(--response-from EXR, from an earlier merge)")
+            if "--response-from" not in message:
+                message += "; or give a saved response: --response-from EXR"
+            raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -220,6 +253,7 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     """
     function = TONEMAP_METHODS[operator]
     canonical = TONEMAP_METHODS.canonical(operator)
+    check_tonemap_parameters(canonical, parameters)
     if canonical.endswith("tutorial"):
         display = function(radiance.astype(np.float64), **parameters)
     else:

@@ -66,7 +66,7 @@ def saved_response(folder: Path, name: str = "response.exr", channels: int = 3,
     """
     code_max = int(changes.pop("code_max", 255))
     levels = np.arange(256) * (code_max / 255)
-    g = 2.2 * np.log(np.maximum(levels, 0.5) / code_max)
+    g = 2.2 * np.log(np.maximum(levels, 0.5) / max(code_max, 1))
     names = "RGB" if channels == 3 else "Y"
     attributes: dict[str, object] = {"hdrio:codeMax": code_max,
                                      "hdrio:responseMethod": "Debevec1997",

@@ -26,11 +26,10 @@ from hdrio.cli.chain import (
 _one = one_argument
 
 
-def _number(values: list[str]) -> float:
-    try:
-        return float(values[0])
-    except ValueError:
-        raise ValueError(f"not a number: {values[0]!r}") from None
+def _stops(values: list[str]) -> float:
+    from hdrio.numbers import check_number
+
+    return check_number("--exposure", values[0], minimum=-64, maximum=64, hint="stops")
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -171,7 +170,7 @@ def _merge(chain: Chain, domain: str) -> None:
 # ------------------------------------------------------------------------ image steps
 
 
-@operation("--exposure", "STOPS", convert=_number,
+@operation("--exposure", "STOPS", convert=_stops,
            help="scale the scene-linear image by 2^STOPS", example="--exposure -1.5")
 def _exposure(chain: Chain, stops: float) -> None:
     from hdrio.imageops import apply_exposure
@@ -194,6 +193,9 @@ def _tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
             parameters[key.strip()] = float(text)
         except ValueError:
             raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
+    from hdrio.numbers import check_tonemap_parameters
+
+    check_tonemap_parameters(name, parameters)
     return name, parameters
 
 
