@@ -250,10 +250,14 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1].
 
     ``parameters`` go to the operator (e.g. ``key=0.18`` for the Reinhard operators).
+    Greyscale radiance (``(H, W, 1)``) is tone-mapped as grey RGB (its luminance is its
+    one channel, since the weights sum to 1) and encoded as RGB.
     """
     function = TONEMAP_METHODS[operator]
     canonical = TONEMAP_METHODS.canonical(operator)
     check_tonemap_parameters(canonical, parameters)
+    if radiance.shape[-1] == 1:
+        radiance = np.repeat(radiance, 3, axis=-1)
     if canonical.endswith("tutorial"):
         display = function(radiance.astype(np.float64), **parameters)
     else:

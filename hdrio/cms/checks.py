@@ -161,21 +161,27 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
         raise InputError(path, f"cannot read image ({oiio.geterror().strip()})")
     try:
         names = list(image.spec().channelnames)
-        if not {"R", "G", "B"} <= set(names):
-            raise InputError(path, f"has channels {','.join(names)}; checks need R, G, B")
+        grey = not {"R", "G", "B"} <= set(names) and "Y" in names
+        if not grey and not {"R", "G", "B"} <= set(names):
+            raise InputError(path, f"has channels {','.join(names)}; checks need R, G, B "
+                                   "(or Y alone)")
         pixels = image.read_image("float")
         if pixels is None:
             raise InputError(path, f"cannot decode pixels ({image.geterror().strip()})")
     finally:
         image.close()
-    rgb = np.asarray(pixels)[..., [names.index(c) for c in "RGB"]]
+    pixels = np.asarray(pixels).reshape(*np.shape(pixels)[:2], len(names))
+    # Greyscale: Y as equal R, G, B (whose luminance is Y whatever the primaries).
+    rgb = pixels[..., [names.index(c) for c in ("YYY" if grey else "RGB")]]
     chromaticities = tuple(header.get("chromaticities", REC709_D65))
     clipped = header.get("hdrio:clippedFraction")
     report = check_pixels(rgb, chromaticities, units=str(header.get("hdrio:units", "unknown")),
                           clipped_fraction=None if clipped is None else float(clipped),
                           gamut=gamut, chart=chart)
     report.source = str(path)
-    if "chromaticities" not in header:
+    if grey:
+        report.notes.append("greyscale (Y): luminance checks only, no colour")
+    elif "chromaticities" not in header:
         report.notes.append("no chromaticities: assumed Rec.709 primaries, D65")
     return report
 
