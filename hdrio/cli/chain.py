@@ -119,6 +119,10 @@ class Chain:
     def say(self, message: str) -> None:
         print(message, file=self.out)
 
+    def note(self, message: str) -> None:
+        """A one-line note on stderr (input repaired, say), shown even when quiet."""
+        print(f"hdrio: note: {message}", file=sys.stderr)
+
 
 def _split(argv: Sequence[str]) -> list[tuple[str, list[str]]]:
     """Tokens into ``(operation or 'read', arguments)``, checking argument counts."""

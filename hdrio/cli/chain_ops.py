@@ -52,7 +52,7 @@ def read_input(chain: Chain, path: Path) -> None:
     if path.suffix.lower() in FLOAT_SUFFIXES:
         from hdrio.imageops import read_image
 
-        pixels, header = read_image(path)
+        pixels, header = read_image(path, say=chain.note)
         # Carry what describes the pixels (primaries, hdrio's provenance), not the file's
         # layout attributes (data window, screen window...), which the writer sets anew.
         attributes = {name: value for name, value in header.items()
