@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
-from hdrio.errors import ResponseSolveError
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
+from hdrio.errors import ResponseSolveError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.paths import check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
