@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance
-from hdrio.errors import InputError
+from hdrio.errors import InputError, library_message
 
 
 def apply_exposure(pixels: np.ndarray, stops: float) -> np.ndarray:
@@ -124,7 +124,7 @@ def read_image(path: str | Path, say=None) -> tuple[np.ndarray, dict[str, object
         channels = 3 if spec.nchannels >= 3 else 1
         pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
         if pixels is None or image.has_error:
-            raise InputError(path, f"cannot decode image ({image.geterror().strip()})")
+            raise InputError(path, f"cannot decode image ({library_message(image.geterror)})")
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, channels)

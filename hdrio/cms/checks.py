@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.calibration import Region
-from hdrio.errors import HdrioError, InputError
+from hdrio.errors import HdrioError, InputError, library_message
 
 REC709_D65 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLORCHECKER = "ColorChecker24 - After November 2014"
@@ -158,7 +158,7 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     header = read_header(path)
     image = oiio.ImageInput.open(str(path))
     if image is None:
-        raise InputError(path, f"cannot read image ({oiio.geterror().strip()})")
+        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
     try:
         names = list(image.spec().channelnames)
         grey = not {"R", "G", "B"} <= set(names) and "Y" in names
@@ -167,7 +167,7 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
                                    "(or Y alone)")
         pixels = image.read_image("float")
         if pixels is None:
-            raise InputError(path, f"cannot decode pixels ({image.geterror().strip()})")
+            raise InputError(path, f"cannot decode pixels ({library_message(image.geterror)})")
     finally:
         image.close()
     pixels = np.asarray(pixels).reshape(*np.shape(pixels)[:2], len(names))

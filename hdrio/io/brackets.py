@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.errors import InputError
+from hdrio.errors import InputError, library_message
 from hdrio.io.exposure import (
     exposure_from_exif,
     exposure_from_filename,
@@ -103,7 +103,7 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
         config.attribute("oiio:UnassociatedAlpha", 1)
         image = oiio.ImageInput.open(str(path), config)
         if image is None:
-            raise InputError(path, f"cannot read image ({_first_line(oiio.geterror())})")
+            raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
         try:
             spec = image.spec()
             base = str(spec.format)
@@ -156,7 +156,7 @@ def _decode_into(image, header: BracketHeader, out: np.ndarray) -> None:
         rows = image.read_scanlines(0, 0, top, bottom, 0, 0, header.channels, base)
         if rows is None or image.has_error:
             raise InputError(header.path, "cannot decode image "
-                             f"({_first_line(image.geterror()) or 'read failed'})")
+                             f"({library_message(image.geterror) or 'read failed'})")
         out[top:bottom] = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
 
 
@@ -173,11 +173,6 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
         codes = np.empty(header.shape, dtype=header.dtype)
         _decode_into(image, header, codes)
     return codes, header.code_max, header.exif
-
-
-def _first_line(message: str) -> str:
-    lines = [line for line in message.strip().splitlines() if line.strip()]
-    return lines[0] if lines else ""
 
 
 def read_brackets(

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.errors import OutputError
+from hdrio.errors import OutputError, library_message
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
@@ -155,15 +155,16 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     try:
         output = oiio.ImageOutput.create(str(temp))
         if output is None:
-            raise OutputError(f"{path}: cannot write this format ({oiio.geterror().strip()})")
+            raise OutputError(f"{path}: cannot write this format "
+                              f"({library_message(oiio.geterror)})")
         try:
             if not output.open(str(temp), spec):
-                raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+                raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
             for top in range(0, height, _ROWS_PER_WRITE):
                 rows = pixels[top: top + _ROWS_PER_WRITE]
                 rows = np.ascontiguousarray(band(rows) if band is not None else rows)
                 if not output.write_scanlines(top, top + rows.shape[0], 0, rows):
-                    raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+                    raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
         finally:
             output.close()
         _publish(temp, path)
