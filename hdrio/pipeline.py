@@ -21,7 +21,7 @@ from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
 from hdrio.errors import ResponseSolveError
 from hdrio.io.brackets import read_brackets
-from hdrio.io.paths import check_outputs
+from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
@@ -282,7 +282,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     the ``tonemap`` operator.
     """
     say = progress or (lambda message: None)
-    # Fail before reading: outputs named well, in folders that take a new file.
+    # Fail before reading: every input a readable file, given once; outputs named well,
+    # in folders that take a new file.
+    check_inputs(paths)
     check_outputs([(output, {".exr"}), *([(preview, None)] if preview is not None else [])],
                   paths)
     require_scene_linear(options.output_space, options.ocio_config)

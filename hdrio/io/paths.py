@@ -105,8 +105,9 @@ def check_output(path: str | Path, inputs: Iterable[str | Path] = (),
         raise OutputError(f"{path}: folder {path.parent} does not exist")
     for source in inputs:
         if _same_file(path, Path(source)):
-            raise OutputError(f"{path}: output would overwrite an input ({source}); "
-                              "choose another name")
+            also = "" if str(source) == str(path) else f" ({source})"
+            raise OutputError(f"{path}: output would overwrite an input{also}; choose "
+                              "another name")
     if writable:
         check_writable(path)
     return path
@@ -135,7 +136,8 @@ def fill_pattern(text: str | Path, fields: Mapping[str, object]) -> Path:
     """``text`` with each ``{name}`` replaced by ``fields[name]``.
 
     Only plain names: ``{0}``, ``{a.b}``, ``{a!r}`` or a lone brace are refused, naming
-    the fields there are (a name pattern is not Python's ``str.format``).
+    the fields there are (a name pattern is not Python's ``str.format``). The message
+    does not repeat ``text``: the caller names the option that gave it.
     """
     text = str(text)
     known = ", ".join(f"{{{name}}}" for name in fields)
@@ -143,11 +145,10 @@ def fill_pattern(text: str | Path, fields: Mapping[str, object]) -> Path:
     def field(match: re.Match) -> str:
         name = match.group(1)
         if name not in fields:
-            raise OutputError(f"{text}: unknown field {{{name}}} in the output name; use "
-                              f"{known}")
+            raise OutputError(f"unknown field {{{name}}} in the output name; use {known}")
         return str(fields[name])
 
     if any(brace in _FIELD.sub("", text) for brace in "{}"):
-        raise OutputError(f"{text}: a brace that is not part of a field {{name}} in the "
-                          f"output name; use {known}")
+        raise OutputError(f"a brace that is not part of a field {{name}} in the output "
+                          f"name; use {known}")
     return Path(_FIELD.sub(field, text))
