@@ -38,7 +38,7 @@ def _stops(values: list[str]) -> float:
 def read_input(chain: Chain, path: Path) -> None:
     """A positional input: brackets wait for --merge; float images go on the stack."""
     from hdrio.grouping import list_images
-    from hdrio.io.paths import check_input, name_too_long
+    from hdrio.io.paths import name_too_long
 
     if not name_too_long(path) and path.is_dir():
         files = list_images(path)
@@ -47,8 +47,7 @@ def read_input(chain: Chain, path: Path) -> None:
         chain.brackets.extend(files)
         chain.inputs.extend(files)
         return
-    check_input(path)
-    chain.inputs.append(path)
+    chain.inputs.append(path)  # brackets are checked by --merge, images when read
     if path.suffix.lower() in FLOAT_SUFFIXES:
         from hdrio.imageops import read_image
 
