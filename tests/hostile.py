@@ -89,6 +89,26 @@ def float_image(folder: Path, name: str = "scene.exr", nan_rows: int = 0,
     return write_exr(folder / name, pixels, pixel_type="float")
 
 
+def unwritable_folder(folder: Path) -> Path:
+    """A folder that refuses new files: read-only by its mode, or (for root, whom modes do
+    not stop) ``/sys``, which refuses every new file; skip the case when neither works."""
+    import pytest
+
+    locked = folder / "locked"
+    locked.mkdir(parents=True)
+    locked.chmod(0o555)
+    try:
+        (locked / "probe").touch()
+    except OSError:
+        return locked
+    (locked / "probe").unlink()
+    try:
+        (Path("/sys") / "hdrio_probe").touch()
+    except OSError:
+        return Path("/sys")
+    pytest.skip("no folder here refuses new files (root, and no /sys)")
+
+
 def symlink_loop(folder: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     link = folder / "loop_1_1.png"

@@ -12,7 +12,6 @@ code and traceback policy of the process itself is tested in tests/test_exit_cod
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -148,11 +147,11 @@ CASES = [
     Case("output type unsupported",
          lambda d: ["merge", *_rgb(d), "-o", h.out(d, "o.bmp"), "-q"], 2, "unsupported"),
     Case("output folder not writable",
-         lambda d: ["merge", *_rgb(d), "-o", "/sys/hdrio_out.exr", "-q"], 2,
+         lambda d: ["merge", *_rgb(d), "-o", h.unwritable_folder(d) / "o.exr", "-q"], 2,
          "permission denied"),
     Case("preview folder not writable",
-         lambda d: ["merge", *_rgb(d), "-o", h.out(d), "--preview", "/sys/p.jpg", "-q"], 2,
-         "permission denied"),
+         lambda d: ["merge", *_rgb(d), "-o", h.out(d), "--preview",
+                    h.unwritable_folder(d) / "p.jpg", "-q"], 2, "permission denied"),
     Case("output pattern bad field (chain)",
          lambda d: [*_rgb(d), "--merge", "-o", str(h.out(d, "out{1}.exr"))], 2,
          "unknown field"),
@@ -262,8 +261,6 @@ def test_catalogue(case: Case, tmp_path: Path, capsys) -> None:
     assert case.fragment.lower() in lines[0].lower(), lines[0]
     assert out == ""
     assert h.snapshot(tmp_path) == before  # nothing written, nothing left, inputs unchanged
-    for leftover in Path("/sys").glob("*hdrio_out*"):
-        pytest.fail(f"left behind: {leftover}")
 
 
 def test_catalogue_is_at_least_the_issue() -> None:
@@ -273,7 +270,6 @@ def test_catalogue_is_at_least_the_issue() -> None:
 
 
 @pytest.fixture(autouse=True)
-def _no_stray_outputs_in_cwd(tmp_path, monkeypatch):
+def _in_case_folder(tmp_path, monkeypatch):
+    """Run each case from its own folder, so a stray relative output shows in the snapshot."""
     monkeypatch.chdir(tmp_path)
-    yield
-    shutil.rmtree(tmp_path / "hdrio_demo", ignore_errors=True)
