@@ -36,12 +36,16 @@ def check_number(option: str, value: object, *, minimum: float | None = None,
     if whole and number != int(number):
         raise NumberError(f"{option} {value}: must be a whole number{tail}")
     if above is not None and not number > above:
-        raise NumberError(f"{option} {value}: must be greater than {above:g}{tail}")
+        raise NumberError(f"{option} {value}: must be greater than {_shown(above)}{tail}")
     if minimum is not None and number < minimum:
-        raise NumberError(f"{option} {value}: must be at least {minimum:g}{tail}")
+        raise NumberError(f"{option} {value}: must be at least {_shown(minimum)}{tail}")
     if maximum is not None and number > maximum:
-        raise NumberError(f"{option} {value}: must be at most {maximum:g}{tail}")
+        raise NumberError(f"{option} {value}: must be at most {_shown(maximum)}{tail}")
     return int(number) if whole else number
+
+
+def _shown(limit: float) -> str:
+    return str(int(limit)) if float(limit).is_integer() else f"{limit:g}"
 
 
 # MergeOptions fields that are numbers: the option naming each, and its range.
