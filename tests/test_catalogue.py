@@ -184,7 +184,9 @@ CASES = [
          lambda d: _sidecar(d, "file,exposure_time_s\nbracket_1_16.png,0.0625\n"), 2,
          "no exposure for this file"),
     Case("sidecar missing", lambda d: h.merge(d, _rgb(d), "--exposures-from",
-                                              d / "none.csv"), 2, "none.csv"),
+                                              d / "none.csv"), 2, "none.csv: no such file"),
+    Case("sidecar is a folder", lambda d: h.merge(d, _rgb(d), "--exposures-from", d / "in"),
+         2, "is a folder, not an exposure list"),
     # ---- numbers: one validator (hdrio.numbers)
     *[Case(f"--lambda {v}", lambda d, v=v: h.merge(d, _rgb(d), "--lambda", v), 2, "--lambda")
       for v in ("-1", "0", "nan", "inf")],
@@ -207,6 +209,8 @@ CASES = [
     Case("response curve NaN",
          lambda d: _response(d, **{"hdrio:responseG": [float("nan")] * 256}), 2,
          "hdrio:responseG"),
+    Case("response missing", lambda d: h.merge(d, _rgb(d), "--response-from",
+                                               d / "no.exr"), 2, "no.exr: no such file"),
     Case("response from a plain EXR",
          lambda d: h.merge(d, _rgb(d), "--response-from", h.float_image(d / "in")), 2,
          "holds no hdrio response"),
@@ -223,6 +227,11 @@ CASES = [
          "--response-from"),
     # ---- greyscale brackets: first class
     Case("grey merge", lambda d: h.merge(d, _grey(d)), 0, "1 ch"),
+    Case("grey 16-bit merge", lambda d: h.merge(d, h.ramp_set(d / "in", channels=1,
+                                                               bit_depth=16)), 0, "16-bit"),
+    Case("grey and colour mixed", lambda d: h.merge(d, [*_rgb(d)[:2],
+                                                       *h.ramp_set(d / "grey", 1)[2:]]), 2,
+         "brackets must match"),
     Case("grey chain", lambda d: [*_grey(d), "--merge", "-o", h.out(d), "--tonemap",
                                   "reinhard-local", "-o", h.out(d, "o.jpg")], 0, "wrote"),
     Case("grey check", _grey_check, 0, "range:"),
