@@ -166,6 +166,12 @@ CASES = [
     Case("huge declared size", _huge_declared, 2, "bracket_1_16.png"),
     Case("single image", lambda d: h.merge(d, _rgb(d)[:1]), 2, "at least 2"),
     # ---- exposures and sidecars
+    Case("no exposure anywhere",
+         lambda d: h.merge(d, [p.rename(p.with_name(f"shot{'abcd'[k]}.png"))
+                               for k, p in enumerate(_rgb(d))]), 2, "no exposure time"),
+    Case("RAW and PNG mixed",
+         lambda d: h.merge(d, [*_rgb(d), h.text_file(d / "in" / "IMG_1.dng", b"II*\0")]),
+         2, "camera RAW and other images"),
     Case("exposure count", lambda d: h.merge(d, _rgb(d), "--exposures", "1,2"), 2,
          "2 exposures given for 4 images"),
     Case("exposure not a number", lambda d: h.merge(d, _rgb(d), "--exposures", "a,b,c,d"),
