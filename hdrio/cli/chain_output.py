@@ -7,7 +7,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hdrio.cli.chain import IMAGE_SUFFIXES, Chain, ChainError, Step, one_argument, operation
+from hdrio.cli.chain import (
+    IMAGE_SUFFIXES,
+    Chain,
+    ChainError,
+    Step,
+    one_argument,
+    operation,
+    step_message,
+)
 from hdrio.cli.commands import _check_outputs
 from hdrio.errors import HdrioError
 
@@ -111,13 +119,13 @@ def check_outputs(steps: list[Step]) -> None:
             try:
                 output_path(Chain(), step.value)  # the pattern's syntax, now
             except HdrioError as error:
-                raise ChainError(f"{step.text}: {error}") from None
+                raise ChainError(step_message(step, error)) from None
         else:
             try:
                 _check_outputs(path if suffix == ".exr" else None,
                                None if suffix == ".exr" else path, inputs)
             except HdrioError as error:
-                raise ChainError(f"{step.text}: {error}") from None
+                raise ChainError(step_message(step, error)) from None
 
 
 # ------------------------------------------------------------------------ information
