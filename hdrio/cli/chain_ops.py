@@ -101,13 +101,13 @@ def _response_from(chain: Chain, path: str) -> None:
 
 
 def _multipliers(values: list[str]) -> tuple[float, ...]:
-    try:
-        numbers = tuple(float(v) for v in values[0].split(","))
-    except ValueError:
-        raise ValueError("expected R,G,B multipliers, e.g. 2.1,1,1.6") from None
-    if len(numbers) != 3 or min(numbers) <= 0:
-        raise ValueError("expected three positive multipliers R,G,B")
-    return numbers
+    from hdrio.numbers import check_number
+
+    parts = values[0].split(",")
+    if len(parts) != 3:
+        raise ValueError("expected three positive multipliers R,G,B, e.g. 2.1,1,1.6")
+    return tuple(check_number("--white-balance", part, above=0.0,
+                              hint="R,G,B multipliers, e.g. 2.1,1,1.6") for part in parts)
 
 
 @operation("--white-balance", "R,G,B", convert=_multipliers,
