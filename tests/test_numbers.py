@@ -44,3 +44,14 @@ def test_tonemap_parameters():
         check_tonemap_parameters("reinhard-global", {"key": -1.0})
     with pytest.raises(NumberError, match="finite"):
         check_tonemap_parameters("reinhard-local", {"phi": float("nan")})
+
+
+@pytest.mark.parametrize("text", ["lots", "nan", "-5"])
+def test_memory_budget_from_the_environment_is_checked(monkeypatch, text):
+    from hdrio.io.staging import budget_bytes
+
+    monkeypatch.setenv("HDRIO_MEMORY_BUDGET_MB", text)
+    with pytest.raises(NumberError, match="HDRIO_MEMORY_BUDGET_MB"):
+        budget_bytes()
+    monkeypatch.setenv("HDRIO_MEMORY_BUDGET_MB", "1.5")
+    assert budget_bytes() == int(1.5 * 2**20)
