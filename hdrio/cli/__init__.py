@@ -9,6 +9,7 @@ closed pipe, ``hdrio info x.exr | head -1``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from collections.abc import Sequence
@@ -51,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         # Whoever read our output has gone; say nothing more (stdout to /dev/null, so
         # the interpreter's final flush cannot fail again).
-        with _suppressed():
+        with contextlib.suppress(OSError, ValueError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
     except KeyboardInterrupt:
@@ -70,12 +71,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _debugging() -> bool:
     return os.environ.get("HDRIO_DEBUG", "").strip() not in ("", "0")
-
-
-def _suppressed():
-    import contextlib
-
-    return contextlib.suppress(OSError, ValueError)
 
 
 def _internal_error(error: BaseException) -> int:
