@@ -24,7 +24,15 @@ from hdrio.io.brackets import read_brackets
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
-from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
+from hdrio.merge.debevec1997 import MergeStatistics
+from hdrio.merge.estimators import (
+    MERGE_METHODS,
+    NOISE_AWARE,
+    effective_weights,
+    merge_domain,
+)
+from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
+from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
 from hdrio.response import RESPONSE_METHODS, CameraResponse
 from hdrio.response.stored import check_response_fits, read_response
@@ -48,7 +56,10 @@ class MergeOptions:
     weighting: str = "Debevec1997"
     sampling: str = "stratified"
     samples: int | None = None
-    merge: str = "log"
+    # Inverse-variance weights from the stack's own noise model (hdrio.merge.estimators):
+    # on the truth harness's core stacks median error 1.03 % against 1.25 % for the
+    # tutorial's log-domain triangle-weighted mean ("log"), p99 3.4 % against 4.8 %.
+    merge: str = "inverse-variance"
     # Drop a saturated channel on its own, not the whole pixel (the tutorial's "pixel"):
     # see hdrio/merge/debevec1997.py.
     saturation: str = "channel"
@@ -66,6 +77,9 @@ class MergeOptions:
     response_from: str | None = None
     # Names in hdrio.skips.SKIPS turned off (all on by default).
     no_skip: tuple[str, ...] = ()
+    # Also predict each pixel's relative standard deviation (hdrio.merge.uncertainty),
+    # written as the EXR layer "uncertainty".
+    uncertainty: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
@@ -87,6 +101,9 @@ class MergeResult:
     exposure_scale: float = 1.0
     colour: ColourState | None = None
     skipped: SkipReport = field(default_factory=SkipReport)
+    noise: NoiseModel | None = None
+    uncertainty: np.ndarray | None = None
+    """``sigma_E / E`` per pixel and channel (``--uncertainty``), else ``None``."""
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -173,12 +190,23 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             metadata=stack.metadata[j:j + 1], kinds=("covers",),
             dropped=stack.dropped + tuple((name, f"{skipped.covering} covers the range")
                                           for name in stack.files if name != stack.files[j]))
-    say(f"merging {merged.count} brackets ({options.merge} domain)")
-    radiance, statistics = MERGE_METHODS[options.merge](
+    method = MERGE_METHODS.canonical(options.merge)
+    noise = (fit_noise(stack.codes, stack.exposures, response,
+                       code_floor=code_variance_floor(stack.files))
+             if method in NOISE_AWARE or options.uncertainty else None)
+    say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
+    radiance, statistics = MERGE_METHODS[method](
         merged, response, options.weighting, options.saturation,
-        early_stop="early-stop" in skips)
+        early_stop="early-stop" in skips, noise=noise)
     skipped.early_stop_fraction = statistics.observations_skipped / (
         statistics.pixels * merged.count)
+    uncertainty = None
+    if options.uncertainty:
+        say("predicting each pixel's uncertainty")
+        uncertainty = relative_uncertainty(
+            merged, response, effective_weights(method, response, merged.exposures,
+                                                options.weighting, noise),
+            noise, merge_domain(method), options.saturation)
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
     timings["merge"] = time.perf_counter() - start
@@ -187,7 +215,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         white_balance=options.white_balance, calibration=options.calibration)
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
-                       skipped=skipped)
+                       skipped=skipped, noise=noise, uncertainty=uncertainty)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -222,11 +250,22 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:sampling": options.sampling,
         "hdrio:samples": int(response.parameters.get("samples", 0)),
         "hdrio:seed": int(options.seed),
-        "hdrio:mergeDomain": options.merge,
+        "hdrio:merge": MERGE_METHODS.canonical(options.merge),
+        "hdrio:mergeDomain": merge_domain(options.merge),
         "hdrio:saturation": options.saturation,
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    if result.noise is not None:
+        attributes.update(result.noise.attributes())
+    if result.uncertainty is not None:
+        finite = result.uncertainty[np.isfinite(result.uncertainty)]
+        attributes["hdrio:uncertainty"] = (
+            "layer uncertainty: predicted relative standard deviation sigma/E per channel")
+        if finite.size:
+            median, p99 = np.percentile(finite, [50, 99])
+            attributes["hdrio:uncertaintyMedian"] = float(median)
+            attributes["hdrio:uncertaintyP99"] = float(p99)
     skipped = result.skipped.lines(stack.shape[2])
     if skipped:
         attributes["hdrio:skipped"] = "; ".join(skipped)
@@ -310,8 +349,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     if pixel_type == "half":
         result.exposure_scale = half_safe_scale(radiance)
     say(f"writing {output}")
+    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
     write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type,
-              scale=result.exposure_scale)
+              scale=result.exposure_scale, layers=layers)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()

@@ -62,9 +62,15 @@ def demo_scene(height: int = 400, width: int = 600, seed: int = 0) -> np.ndarray
     return np.maximum(scene, 1e-5).astype(np.float32)
 
 
+DEFAULT_SHOT_NOISE = 3e-5
+"""Variance per unit sensor exposure, relative to full well (about 33,000 electrons)."""
+DEFAULT_READ_NOISE = 2e-4
+"""Standard deviation relative to full well (about 6.6 electrons)."""
+
+
 def render_brackets(radiance: np.ndarray, exposures, response: Response = gamma_response,
-                    bit_depth: int = 8, shot_noise: float = 3e-5, read_noise: float = 2e-4,
-                    seed: int = 0) -> np.ndarray:
+                    bit_depth: int = 8, shot_noise: float = DEFAULT_SHOT_NOISE,
+                    read_noise: float = DEFAULT_READ_NOISE, seed: int = 0) -> np.ndarray:
     """Render code values ``(P, H, W, C)`` of ``radiance`` for each exposure time.
 
     Sensor exposure ``X = E * t`` saturates at 1; noise is Gaussian with variance

@@ -135,12 +135,14 @@ def test_response_from_an_earlier_exr_reproduces_the_merge(brackets, out, capsys
     # The header stores g at all 256 codes of 8-bit brackets, so the reused curve is the
     # solved one; but it records the supported codes as one range per channel, so the few
     # codes inside it that carried no sample (weight 0 in the first merge) now count.
-    # Values agree to float32 rounding except at those pixels, which move by up to 2 %:
-    # which codes go unsampled depends on the draw, and over seeds 0-3 the largest move
-    # was 0.8-2.0 % with the million-candidate sampler, 1.3-1.9 % with the 2^14 grid.
+    # Values agree to float32 rounding except at those pixels, which move by a few %:
+    # which codes go unsampled depends on the draw (over seeds 0-3 the largest move was
+    # 1.3-1.9 % with the log merge); the inverse-variance merge gives those codes their
+    # full noise-model weight, and its noise model is refitted on the reused curve
+    # (largest move 3.4 % at seed 0). Bound: 5 %.
     relative = np.abs(exr_pixels(second) / exr_pixels(first) - 1.0)
     assert np.mean(relative < 1e-5) > 0.99  # 99.6 % today
-    assert relative.max() < 0.025
+    assert relative.max() < 0.05
 
 
 def test_merge_domain_linear(brackets, out, capsys):

@@ -40,10 +40,14 @@ def _ratio(rows: list[dict], numerator: str, denominator: str) -> float | None:
 
 
 def ratios(rows: list[dict]) -> dict[str, float | None]:
-    """The acceptance ratios of issue #4, each from rows timed in this run."""
+    """The acceptance ratios of issues #4 and #13, each from rows timed in this run."""
     return {
         "merge: OpenCV MergeDebevec / hdrio (log)":
             _ratio(rows, "OpenCV MergeDebevec", "hdrio merge (log)"),
+        "merge: OpenCV MergeDebevec / hdrio (inverse-variance, the default)":
+            _ratio(rows, "OpenCV MergeDebevec", "hdrio merge (inverse-variance)"),
+        "merge: hdrio (inverse-variance, noise fit included) / hdrio (log)":
+            _ratio(rows, "hdrio merge (inverse-variance)", "hdrio merge (log)"),
         "merge: hdrio (log) / floor": _ratio(rows, "hdrio merge (log)",
                                              "floor (copy of the codes, all cores)"),
         "merge: hdrio (linear) / floor": _ratio(rows, "hdrio merge (linear)",

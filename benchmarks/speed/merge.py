@@ -12,6 +12,7 @@ from benchmarks.speed.floor import parallel_copy
 from benchmarks.speed.scene import true_response
 from benchmarks.timing import measure_alternately, measure_call
 from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import radiance_error, well_exposed
 
@@ -25,15 +26,19 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
     # shared) falls on all three alike. The floor copies into a buffer it reuses; the
     # merges allocate their output each call, as a caller's merge does.
     destination = np.empty_like(stack.codes)
+    # "inverse-variance" is the default estimator with its noise model fitted from the
+    # codes inside the call (hdrio.merge.noise): what a merge costs now, against "log",
+    # the kernel as it was before the noise model.
     timings = measure_alternately({
         "floor": lambda: parallel_copy(stack.codes, destination),
         "log": lambda: merge_brackets(stack, response, domain="log")[0],
         "linear": lambda: merge_brackets(stack, response, domain="linear")[0],
+        "inverse-variance": lambda: MERGE_METHODS["inverse-variance"](stack, response)[0],
     }, repeats)
     destination = None
     rows.append({"row": "merge", "method": "floor (copy of the codes, all cores)",
                  "seconds": timings["floor"].seconds, "peak_mb": timings["floor"].peak_mb})
-    for domain in ("log", "linear"):
+    for domain in ("log", "linear", "inverse-variance"):
         timing = timings[domain]
         error = radiance_error(timing.result, radiance, mask)
         rows.append({"row": "merge", "method": f"hdrio merge ({domain})",

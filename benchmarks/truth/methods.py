@@ -16,8 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from benchmarks.truth.stacks import Stack
-from hdrio.merge.debevec1997 import merge_brackets
+from benchmarks.truth.report import NOISE_ORACLE
+from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE, Stack
+from hdrio.merge.estimators import MERGE_METHODS
+from hdrio.merge.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
 from hdrio.pipeline import MergeOptions, merge_stack
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
@@ -70,24 +72,65 @@ class Method:
         return stack.spec.bits in self.bits
 
 
+def exposure_stack(stack: Stack) -> ExposureStack:
+    """The rendered codes as hdrio sees them, named as a user's files would be (``.jpg``
+    for the JPEG stacks: the noise model floors a JPEG's code noise)."""
+    suffix = ".jpg" if stack.spec.jpeg else ".png"
+    return ExposureStack.from_arrays(stack.codes, stack.times, code_max=stack.code_max,
+                                     files=[f"frame{j}{suffix}" for j in range(len(stack.times))])
+
+
 def _hdrio(options: MergeOptions) -> Callable[[Stack], MethodOutput]:
     def run(stack: Stack) -> MethodOutput:
-        exposures = ExposureStack.from_arrays(stack.codes, stack.times, code_max=stack.code_max)
-        result = merge_stack(exposures, options)
+        result = merge_stack(exposure_stack(stack), options)
         return MethodOutput(result.radiance, result.response.log_inverse)
 
     return run
 
 
+def true_response(stack: Stack) -> tuple[CameraResponse, float]:
+    """The true ``g`` as a :class:`CameraResponse` (``g(mid) = 0``), and the sensor exposure
+    at the middle code (the unit of the response's relative ``X``)."""
+    g = stack.curve.log_inverse(np.arange(stack.code_max + 1), stack.code_max)
+    middle = g[(stack.code_max + 1) // 2]
+    table = np.repeat((g - middle)[:, None], 3, axis=1)
+    return (CameraResponse(table, stack.code_max, np.ones(table.shape, dtype=bool),
+                           method="truth"), float(np.exp(middle)))
+
+
+def true_noise(stack: Stack) -> NoiseModel:
+    """The renderer's noise (:func:`hdrio.synthetic.render_brackets`) in the response's
+    relative units: shot and read noise of the sensor, rounding of the codes."""
+    _, unit = true_response(stack)
+    return NoiseModel(np.full(3, SHOT_NOISE / unit), np.full(3, READ_NOISE**2 / unit**2),
+                      np.full(3, QUANTISATION), source="truth")
+
+
 def _oracle(stack: Stack) -> MethodOutput:
     """hdrio's default merge given the true response: the error left to the merge alone."""
-    exposures = ExposureStack.from_arrays(stack.codes, stack.times, code_max=stack.code_max)
-    g = stack.curve.log_inverse(np.arange(stack.code_max + 1), stack.code_max)
-    table = np.repeat((g - g[(stack.code_max + 1) // 2])[:, None], 3, axis=1)
-    response = CameraResponse(table, stack.code_max, np.ones(table.shape, dtype=bool),
-                              method="truth")
-    radiance, _ = merge_brackets(exposures, response, MergeOptions().weighting)
-    return MethodOutput(radiance, table)
+    response, _ = true_response(stack)
+    exposures = exposure_stack(stack)
+    radiance, _ = MERGE_METHODS[MergeOptions().merge](
+        exposures, response, MergeOptions().weighting,
+        noise=fit_noise(exposures.codes, exposures.exposures, response,
+                        code_floor=code_variance_floor(exposures.files)))
+    return MethodOutput(radiance, response.log_inverse)
+
+
+def _oracle_noise_aware(stack: Stack) -> MethodOutput:
+    """True response, true noise model, inverse-variance weights: the bound to approach."""
+    response, _ = true_response(stack)
+    radiance, _ = MERGE_METHODS["inverse-variance"](exposure_stack(stack), response,
+                                                    noise=true_noise(stack))
+    return MethodOutput(radiance, response.log_inverse)
+
+
+def _oracle_Poisson(stack: Stack) -> MethodOutput:
+    """True response, the Poisson estimator (sum of linear values over sum of times)."""
+    response, _ = true_response(stack)
+    radiance, _ = MERGE_METHODS["Poisson"](exposure_stack(stack), response,
+                                           noise=true_noise(stack))
+    return MethodOutput(radiance, response.log_inverse)
 
 
 def _opencv_inputs(stack: Stack) -> tuple[list[np.ndarray], np.ndarray]:
@@ -139,14 +182,19 @@ def _colour_hdri(stack: Stack) -> MethodOutput:
 
 
 HDRIO_VARIANTS: dict[str, tuple[MergeOptions, str]] = {
-    "hdrio default": (MergeOptions(), "triangle weights, 1000 stratified samples, lambda 50, "
-                      "log, per-channel saturation"),
+    "hdrio default": (MergeOptions(), "Debevec response (triangle weights, 1000 stratified "
+                      "samples, lambda 50), inverse-variance merge with the fitted noise "
+                      "model, per-channel saturation"),
+    "hdrio log": (MergeOptions(merge="log"), "default response, the tutorial's log-domain "
+                  "triangle-weighted merge (the default before the noise model)"),
+    "hdrio Poisson": (MergeOptions(merge="Poisson"), "default response, Poisson estimator"),
     "hdrio tutorial": (MergeOptions(weighting="tutorial-hat", sampling="tutorial",
-                                    saturation="pixel"),
+                                    merge="log", saturation="pixel"),
                        "the tutorial's hat weights, sample grid and per-pixel saturation"),
     "hdrio pixel saturation": (MergeOptions(saturation="pixel"),
                                "default with the tutorial's per-pixel saturation policy"),
-    "hdrio linear": (MergeOptions(merge="linear"), "default, merged in the linear domain"),
+    "hdrio linear": (MergeOptions(merge="linear"), "default response, triangle-weighted "
+                     "merge in the linear domain"),
     "hdrio lambda 10": (MergeOptions(smoothing=10.0), "default with lambda 10"),
     "hdrio lambda 200": (MergeOptions(smoothing=200.0), "default with lambda 200"),
     "hdrio 300 samples": (MergeOptions(samples=300), "default with 300 samples"),
@@ -168,6 +216,11 @@ def all_methods() -> list[Method]:
                "camera_response_functions_Debevec1997 + image_stack_to_HDRI"),
         Method("oracle (true response)", "reference", _oracle,
                description="hdrio's default merge with the true response: merge error only"),
+        Method(NOISE_ORACLE, "reference", _oracle_noise_aware,
+               description="true response, true noise model, inverse-variance weights: the "
+                           "bound hdrio is measured against"),
+        Method("oracle Poisson", "reference", _oracle_Poisson,
+               description="true response, Poisson estimator (no noise parameters)"),
     ]
     return methods
 

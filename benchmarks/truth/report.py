@@ -14,6 +14,7 @@ GROUPS = (("core", "Core: 8-bit, 7 frames 2 EV apart, every scene x every curve"
           ("16-bit", "16-bit, 7 frames 2 EV apart (OpenCV and colour-hdri take 8-bit only: "
                      "hdrio alone)"))
 DEFAULT = "hdrio default"
+NOISE_ORACLE = "oracle noise-aware"
 
 
 def ok_rows(rows: Iterable[dict], **where: object) -> list[dict]:
@@ -150,6 +151,40 @@ def full_run(rows: list[dict], methods: list[str], peers: list[str]) -> list[str
     return lines + [""]
 
 
+def oracle_ratios(rows: list[dict], methods: list[str], reference: str) -> list[str]:
+    """Each method's error over ``reference``'s (the noise-aware oracle), per group.
+
+    Per group: the ratio of the means over stacks of the per-stack median and p99 (the
+    issue's measure), and the worst single stack's ratio of each.
+    """
+    lines = [f"### Ratio to the {reference}", "",
+             "Mean over stacks of the per-stack median (p99) error, divided by the oracle's; "
+             "*worst* is the largest per-stack ratio.", "",
+             "| group | method | stacks | median ratio | p99 ratio | worst median ratio | "
+             "worst p99 ratio |", "|---|---|---|---|---|---|---|"]
+    groups = [g for g, _ in GROUPS if any(r["group"] == g for r in rows)] + ["all"]
+    for group in groups:
+        subset = [r for r in rows if group == "all" or r["group"] == group]
+        oracle = {r["stack"]: r["well"] for r in ok_rows(subset, method=reference)}
+        for method in methods:
+            if method == reference:
+                continue
+            mine = [r for r in ok_rows(subset, method=method) if r["stack"] in oracle
+                    and isinstance(r["well"]["median"], float)]
+            if not mine:
+                continue
+            ratio = {}
+            for metric in ("median", "p99"):
+                ours = [r["well"][metric] for r in mine]
+                theirs = [oracle[r["stack"]][metric] for r in mine]
+                ratio[metric] = (sum(ours) / sum(theirs),
+                                 max(a / b for a, b in zip(ours, theirs) if b > 0))
+            lines.append(f"| {group} | {method} | {len(mine)} | {ratio['median'][0]:.3f} | "
+                         f"{ratio['p99'][0]:.3f} | {ratio['median'][1]:.2f} | "
+                         f"{ratio['p99'][1]:.2f} |")
+    return lines + [""]
+
+
 def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
     rows, env, config = results["rows"], results["environment"], results["config"]
     methods = [m["name"] for m in results["methods"]]
@@ -168,9 +203,13 @@ def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
             "pixels: *median err* is the median over stacks of each stack's median, *max "
             "p99* the worst stack's 99th percentile; clipped, black and other (see "
             "docs/accuracy.md) use the same scale. "
-            "*oracle* is hdrio's merge given the true response (a reference, not a method).",
+            "*oracle (true response)* is hdrio's default merge given the true response; "
+            f"*{NOISE_ORACLE}* adds the true noise model (the bound); *oracle Poisson* is "
+            "the Poisson estimator with the true response (references, not methods).",
             ""]
     out += full_run(rows, methods, peers)
+    if any(r["method"] == NOISE_ORACLE for r in ok_rows(rows)):
+        out += oracle_ratios(rows, methods, NOISE_ORACLE)
     for group, title in GROUPS:
         subset = [r for r in rows if r["group"] == group]
         if not subset:

@@ -15,10 +15,10 @@ import numpy as np
 
 from benchmarks.truth.curves import Curve
 from benchmarks.truth.scenes import Scene
-from hdrio.synthetic import render_brackets
+from hdrio.synthetic import DEFAULT_READ_NOISE, DEFAULT_SHOT_NOISE, render_brackets
 
-SHOT_NOISE = 3e-5  # variance per unit exposure, relative to full well (~33,000 e-)
-READ_NOISE = 2e-4  # standard deviation, relative to full well (~6.6 e-)
+SHOT_NOISE = DEFAULT_SHOT_NOISE  # variance per unit exposure, relative to full well
+READ_NOISE = DEFAULT_READ_NOISE  # standard deviation, relative to full well
 JPEG_QUALITY = 90  # libjpeg quality through OpenImageIO, its default 4:2:0 chroma subsampling
 
 

@@ -132,13 +132,14 @@ def _merge_domain(token: str) -> bool:
 
 def _merge_options(values: list[str]) -> str:
     from hdrio.merge import MERGE_METHODS
+    from hdrio.pipeline import MergeOptions
 
-    return MERGE_METHODS.canonical(values[0]) if values else "log"
+    return MERGE_METHODS.canonical(values[0]) if values else MergeOptions().merge
 
 
-@operation("--merge", optional="DOMAIN", accepts_optional=_merge_domain, convert=_merge_options,
-           help="merge the pending brackets into scene-linear radiance (domain: log, the "
-                "default, or linear)",
+@operation("--merge", optional="METHOD", accepts_optional=_merge_domain, convert=_merge_options,
+           help="merge the pending brackets into scene-linear radiance (estimator: "
+                "inverse-variance, the default, Poisson, log (the tutorial's) or linear)",
            example="a.jpg b.jpg c.jpg --merge linear -o out.exr")
 def _merge(chain: Chain, domain: str) -> None:
     from hdrio.io.brackets import read_brackets

@@ -9,7 +9,8 @@ import numpy as np
 
 from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
-from hdrio.merge.debevec1997 import MERGE_METHODS, SATURATION_POLICIES
+from hdrio.merge.debevec1997 import SATURATION_POLICIES
+from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.weighting import WEIGHTING_METHODS
 from hdrio.pipeline import MergeOptions, MergeResult, merge_files
 from hdrio.response import RESPONSE_METHODS, SAMPLING_METHODS
@@ -44,9 +45,10 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--weighting", default=defaults.weighting,
                        help=f"weighting function: {', '.join(WEIGHTING_METHODS.names())} "
                             "(default %(default)s)")
-    group.add_argument("--merge", default=defaults.merge, metavar="DOMAIN",
-                       help=f"merge domain: {', '.join(MERGE_METHODS.names())} "
-                            "(default %(default)s)")
+    group.add_argument("--merge", default=defaults.merge, metavar="METHOD",
+                       help=f"merge estimator: {', '.join(MERGE_METHODS.names())} "
+                            "(default %(default)s: weights from the stack's noise model; "
+                            "'log' is the tutorial's)")
     group.add_argument("--saturation", default=defaults.saturation,
                        choices=SATURATION_POLICIES,
                        help="a code at the top of the range drops that channel ('channel') "
@@ -59,6 +61,9 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--response-from", metavar="EXR", default=None,
                        help="use the camera response saved in an EXR written by hdrio "
                             "instead of solving (skips the solve)")
+    group.add_argument("--uncertainty", action="store_true",
+                       help="also write each pixel's predicted relative standard deviation "
+                            "(from the noise model) as the EXR layer 'uncertainty'")
     group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
                        choices=[*SKIPS, "all"],
                        help="turn off one of the work skips (repeatable): "
@@ -73,6 +78,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
         seed=args.seed, saturation=args.saturation, response_from=args.response_from,
+        uncertainty=args.uncertainty,
         no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
         **colour_fields(args),
     )
@@ -154,7 +160,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
-        f"merge:     {result.options.merge} domain, {times['merge']:.2f} s; clipped in every "
+        f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
@@ -221,7 +227,7 @@ def add_demo(sub) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from hdrio.demo import DEMO_EXPOSURES, write_demo_brackets
+    from hdrio.demo import DEMO_EXPOSURES, oracle_radiance, write_demo_brackets
     from hdrio.synthetic import radiance_error, well_exposed
 
     folder = Path(args.output_dir)
@@ -239,4 +245,13 @@ def run_demo(args: argparse.Namespace) -> int:
           f"{100 * mask.mean():.1f} % of pixels well exposed in some bracket: median "
           f"{100 * error['median']:.2f} %, p95 {100 * error['p95']:.2f} %, "
           f"p99 {100 * error['p99']:.2f} %")
+    bound = radiance_error(oracle_radiance(result.stack), truth, mask)
+    print(f"bound:     the noise-aware oracle (true curve, true noise, inverse-variance "
+          f"weights): median {100 * bound['median']:.2f} %, p95 {100 * bound['p95']:.2f} %, "
+          f"p99 {100 * bound['p99']:.2f} %")
+    ratio = max(error["median"] / bound["median"], error["p99"] / bound["p99"])
+    verdict = ("within 10 % of the bound" if ratio <= 1.1 else
+               f"{ratio:.2f}x the bound (a calibrated curve or --merge inverse-variance "
+               "closes the gap)")
+    print(f"verdict:   {verdict}")
     return 0

@@ -9,6 +9,7 @@ ColorChecker 24 region, the patches' CIE Delta E 2000 against their reference va
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +38,9 @@ class CheckReport:
     gamut: str
     clipped_fraction: float | None = None
     delta_E: list[float] | None = None
+    uncertainty: dict[str, float] | None = None
+    """Of the ``uncertainty`` layer (``hdrio merge --uncertainty``): its median, 99th
+    percentile and the fraction of pixels above 10 % (relative standard deviation)."""
     source: str = ""
     notes: list[str] = field(default_factory=list)
 
@@ -173,17 +177,31 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     pixels = np.asarray(pixels).reshape(*np.shape(pixels)[:2], len(names))
     # Greyscale: Y as equal R, G, B (whose luminance is Y whatever the primaries).
     rgb = pixels[..., [names.index(c) for c in ("YYY" if grey else "RGB")]]
+    layer = [names.index(n) for n in names if n.startswith("uncertainty.")]
     chromaticities = tuple(header.get("chromaticities", REC709_D65))
     clipped = header.get("hdrio:clippedFraction")
     report = check_pixels(rgb, chromaticities, units=str(header.get("hdrio:units", "unknown")),
                           clipped_fraction=None if clipped is None else float(clipped),
                           gamut=gamut, chart=chart)
     report.source = str(path)
+    if layer:
+        report.uncertainty = uncertainty_summary(pixels[..., layer])
     if grey:
         report.notes.append("greyscale (Y): luminance checks only, no colour")
     elif "chromaticities" not in header:
         report.notes.append("no chromaticities: assumed Rec.709 primaries, D65")
     return report
+
+
+def uncertainty_summary(layer: np.ndarray) -> dict[str, float]:
+    """Median, 99th percentile and share above 10 % of a relative-uncertainty layer."""
+    values = np.asarray(layer, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return {"median": math.nan, "p99": math.nan, "above_10pct": math.nan}
+    median, p99 = np.percentile(values, [50, 99])
+    return {"median": float(median), "p99": float(p99),
+            "above_10pct": float(np.mean(values > 0.1))}
 
 
 def format_report(report: CheckReport) -> str:
@@ -204,5 +222,10 @@ def format_report(report: CheckReport) -> str:
         dE = np.asarray(report.delta_E)
         lines.append(f"  chart:        Delta E 2000 mean {dE.mean():.2f}, max {dE.max():.2f} "
                      f"(patch {int(dE.argmax()) + 1})")
+    if report.uncertainty is not None:
+        u = report.uncertainty
+        lines.append(f"  uncertainty:  median {100 * u['median']:.2f} %, 99 % "
+                     f"{100 * u['p99']:.1f} % (relative sigma); "
+                     f"{100 * u['above_10pct']:.2f} % of values above 10 %")
     lines += [f"  note:         {note}" for note in report.notes]
     return "\n".join(lines)

@@ -134,7 +134,8 @@ def _publish(temp: Path, path: Path) -> None:
 
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
-                band: Callable[[np.ndarray], np.ndarray] | None = None) -> Path:
+                band: Callable[[np.ndarray], np.ndarray] | None = None,
+                channel_names: list[str] | None = None) -> Path:
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
     Rows go out in bands of 64, each through ``band`` first when given (a conversion
@@ -146,7 +147,9 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     path = Path(path)
     height, width, channels = pixels.shape
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
-    if channels == 1:
+    if channel_names is not None:
+        spec.channelnames = tuple(channel_names)
+    elif channels == 1:
         spec.channelnames = ("Y",)
     for name, value in (attributes or {}).items():
         type_name, stored = _type_of(value)
@@ -174,28 +177,43 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
 
 
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
-              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0) -> Path:
+              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
+              layers: Mapping[str, np.ndarray] | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
     range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
     :func:`hdrio.pipeline.half_safe_scale`).
+
+    ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
+    channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the
+    image's own.
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
     factor = np.float32(scale)
+    own = rgb.shape[-1]
+    names = list("RGBA"[:own]) if own in (3, 4) else ["Y"] if own == 1 else []
+    planes = [rgb]
+    for name, layer in (layers or {}).items():
+        layer = layer if layer.ndim == 3 else layer[..., None]
+        planes.append(layer)
+        names += [f"{name}.{c}" for c in ("RGB" if layer.shape[-1] == 3 else "Y")]
+    pixels = rgb if len(planes) == 1 else np.concatenate(
+        [np.asarray(p, dtype=np.float32) for p in planes], axis=-1)
 
     def band(rows: np.ndarray) -> np.ndarray:
-        rows = np.asarray(rows, dtype=np.float32)
+        rows = np.array(rows, dtype=np.float32)  # a copy when layered: scaled in place
         if factor != 1:
-            rows = rows * factor
+            rows[..., :own] *= factor
         if pixel_type == "half":
             rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX)
         return rows
 
     attributes = {"compression": compression, **(attributes or {})}
-    return write_image(path, rgb, pixel_type, attributes, band)
+    return write_image(path, pixels, pixel_type, attributes, band,
+                       channel_names=names if len(planes) > 1 else None)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:

@@ -41,7 +41,6 @@ from hdrio.io.staging import is_staged, release
 from hdrio.merge.kernel import MAX_BRACKETS, PAIR_LEVELS, merge_kernel, pair_tables
 from hdrio.merge.weighting import weights_table
 from hdrio.parallel import threads
-from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -78,14 +77,17 @@ def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str
 
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
-                   saturation: str = "channel", early_stop: bool = True
+                   saturation: str = "channel", early_stop: bool = True,
+                   weights: np.ndarray | None = None
                    ) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
 
     ``saturation`` is ``"channel"`` (default: a saturated channel is dropped on its own)
     or ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel).
     ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
-    result to float32 rounding).
+    result to float32 rounding). ``weights``, when given, are per-bracket weights
+    ``w_j(z)`` ``(P, C, code_max + 1)`` in place of ``weighting``'s ``w(z)`` (the
+    estimators of :mod:`hdrio.merge.estimators`).
 
     Codes staged in a file (:mod:`hdrio.io.staging`) are merged a band of rows at a time,
     each band's pages given back once merged.
@@ -109,7 +111,7 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
                          f"brackets have {channels}")
     if count > MAX_BRACKETS:
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
-    terms, estimates = merge_tables(response, stack.exposures, weighting, domain)
+    terms, estimates = merge_tables(response, stack.exposures, weighting, domain, weights)
     if saturation == "channel" and channels == 3 and stack.code_max < PAIR_LEVELS:
         pairs = pair_tables(terms, stack.code_max)
     else:
@@ -134,34 +136,27 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     return radiance, statistics
 
 
+def code_weights(response: CameraResponse, weighting: str) -> np.ndarray:
+    """``weighting``'s ``w(z)`` on the codes the solve supported, ``(1, C, levels)``."""
+    table = weights_table(weighting, response.code_max)[:, None] * response.supported
+    return np.ascontiguousarray(table.T)[None]
+
+
 def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str,
-                 domain: str) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's tables ``(P, C, levels)``: the terms ``w(z) x_j(z) + i w(z)``
+                 domain: str, weights: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's tables ``(P, C, levels)``: the terms ``w_j(z) x_j(z) + i w_j(z)``
     (complex128: the numerator's term, the denominator's), with ``w(Z_max) = 0``, and
     the estimates ``x_j(z)`` (float64).
 
-    Per channel, codes where ``g`` is extrapolated (no weighted sample fell there) say
-    little about radiance, so they get no weight; the fallbacks still cover every pixel.
+    ``weights`` ``(P, C, levels)``: per-bracket weights (the noise-aware estimators);
+    else ``weighting``'s ``w(z)``, the same for every bracket. Per channel, codes where
+    ``g`` is extrapolated (no weighted sample fell there) say little about radiance, so
+    they get no weight; the fallbacks still cover every pixel.
     """
-    weights = weights_table(weighting, response.code_max)[:, None] * response.supported
-    weights[-1] = 0.0  # a saturated observation never counts (the kernel relies on it)
-    weights = np.ascontiguousarray(weights.T)
+    weights = code_weights(response, weighting) if weights is None else \
+        np.array(weights, dtype=np.float64)  # a copy: the end is zeroed below
+    weights[..., -1] = 0.0  # a saturated observation never counts (the kernel relies on it)
     estimates = np.ascontiguousarray(
         estimate_tables(response, exposures, domain).transpose(0, 2, 1))
-    return weights[None] * estimates + 1j * weights[None], estimates
-
-
-def _merge_log(stack, response, weighting="Debevec1997", saturation="channel",
-               early_stop=True):
-    return merge_brackets(stack, response, weighting, "log", saturation, early_stop)
-
-
-def _merge_linear(stack, response, weighting="Debevec1997", saturation="channel",
-                  early_stop=True):
-    return merge_brackets(stack, response, weighting, "linear", saturation, early_stop)
-
-
-MERGE_METHODS: MethodRegistry = MethodRegistry(
-    "merge", {"log": _merge_log, "linear": _merge_linear},
-    aliases={"Debevec1997": "log", "tutorial": "log"},
-)
+    return weights * estimates + 1j * weights, estimates

@@ -1,0 +1,102 @@
+"""Per-pixel uncertainty: the predicted relative standard deviation of the merged radiance.
+
+For a weighted mean ``E = sum_j w_j x_j / sum_j w_j`` of independent estimates with
+variances ``v_j`` (the noise model, :mod:`hdrio.merge.noise`),
+
+    var(E) = sum_j w_j^2 v_j / (sum_j w_j)^2
+
+(``1 / sum_j w_j`` for the inverse-variance weights); the layer is ``sigma_E / E``. The
+log-domain merge averages ``ln x_j``, whose variance is ``v_j / x_j^2`` to first order, so
+there the layer is ``sqrt(sum_j w_j^2 v_j / x_j^2) / sum_j w_j``. The observations are
+those the merge used: the same saturation policy (a saturated code drops its bracket and
+every longer one), and a pixel left with no weight takes its fallback bracket's own
+``sqrt(v) / x`` (for a pixel clipped in every bracket that is a lower bound on a value
+that is itself a lower bound; such pixels are counted apart in the header).
+
+What it leaves out: the response's own error, which is common to neighbouring pixels
+(it moves the whole image's tone curve, not one pixel), and motion.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from hdrio.merge.debevec1997 import estimate_tables
+from hdrio.merge.noise import NoiseModel, observation_variance
+from hdrio.parallel import threads
+from hdrio.response.curve import CameraResponse
+from hdrio.stack import ExposureStack
+
+_KERNEL = dict(cache=True, nogil=True, error_model="numpy")
+
+
+@njit(parallel=True, **_KERNEL)
+def _uncertainty_kernel(codes, weights, variances, estimates, code_max, per_channel,
+                        log_domain, out):  # pragma: no cover - compiled
+    """``out[y, i]``: relative sigma of channel ``i % C`` of pixel ``i // C`` of row ``y``.
+
+    ``codes`` ``(P, H, W * C)`` shortest first; ``weights``, ``variances`` and
+    ``estimates`` ``(P, C, levels)``.
+    """
+    count = codes.shape[0]
+    channels = weights.shape[1]
+    height, n = out.shape
+    for y in prange(height):
+        for i in range(n):
+            x = i // channels
+            c = i % channels
+            total = 0.0
+            spread = 0.0
+            mean = 0.0
+            kept = 0
+            while kept < count:
+                row = codes[kept, y]
+                z = row[i]
+                saturated = z == code_max
+                if not per_channel:
+                    for k in range(channels):
+                        saturated |= row[x * channels + k] == code_max
+                if saturated:
+                    break
+                w = weights[kept, c, z]
+                if w > 0.0:
+                    v = variances[kept, c, z]
+                    e = estimates[kept, c, z]
+                    total += w
+                    mean += w * e
+                    spread += w * w * (v / (e * e) if log_domain else v)
+                kept += 1
+            if total > 0.0:
+                out[y, i] = math.sqrt(spread) / total if log_domain else \
+                    math.sqrt(spread) / mean
+            else:
+                j = kept - 1 if kept > 0 else 0
+                z = codes[j, y][i]
+                out[y, i] = math.sqrt(variances[j, c, z]) / estimates[j, c, z]
+
+
+def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
+                         weights: np.ndarray, noise: NoiseModel, domain: str = "linear",
+                         saturation: str = "channel") -> np.ndarray:
+    """``sigma_E / E`` of every pixel and channel, float32 ``(H, W, C)`` (module docstring).
+
+    ``weights``: the merge's weights, ``(P, C, levels)`` or ``(1, C, levels)`` (a code
+    weighting shared by every bracket), zero at ``Z_max``.
+    """
+    import numba
+
+    count, height, width, channels = stack.codes.shape
+    weights = np.ascontiguousarray(np.broadcast_to(
+        weights, (count, channels, response.code_max + 1)), dtype=np.float64)
+    variances = np.ascontiguousarray(observation_variance(response, stack.exposures, noise))
+    estimates = np.ascontiguousarray(
+        estimate_tables(response, stack.exposures, "linear").transpose(0, 2, 1))
+    out = np.empty((height, width * channels), dtype=np.float32)
+    numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
+    _uncertainty_kernel(stack.codes.reshape(count, height, width * channels), weights,
+                        variances, estimates, stack.code_max, saturation == "channel",
+                        domain == "log", out)
+    return out.reshape(height, width, channels)

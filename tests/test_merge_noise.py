@@ -1,0 +1,246 @@
+"""The noise model, the noise-aware estimators and the uncertainty layer (issue 13).
+
+Ground truth: the demo scene rendered through ``f(x) = x^(1/2.2)`` with the renderer's
+shot and read noise (``hdrio.synthetic.render_brackets``), so the true curve and the true
+noise model are known in the response's relative units.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hdrio.merge import MERGE_METHODS
+from hdrio.merge.estimators import NOISE_AWARE, effective_weights
+from hdrio.merge.noise import (
+    JPEG_CODE_VARIANCE,
+    QUANTISATION,
+    NoiseModel,
+    code_variance_floor,
+    fit_noise,
+    observation_variance,
+    usable_codes,
+)
+from hdrio.merge.uncertainty import relative_uncertainty
+from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.response.curve import CameraResponse
+from hdrio.stack import ExposureStack
+from hdrio.synthetic import (
+    DEFAULT_READ_NOISE,
+    DEFAULT_SHOT_NOISE,
+    demo_scene,
+    gamma_response,
+    radiance_error,
+    render_brackets,
+    well_exposed,
+)
+
+TIMES = np.array([1 / 1024, 1 / 256, 1 / 64, 1 / 16, 1 / 4, 1, 4])
+SHOT, READ = DEFAULT_SHOT_NOISE, DEFAULT_READ_NOISE  # variance per unit X, read sigma
+
+
+def gamma_truth(code_max: int = 255, channels: int = 3) -> tuple[CameraResponse, float]:
+    """The true ``g`` of ``x^(1/2.2)`` with ``g(mid) = 0``, and the unit of its ``X``."""
+    z = np.maximum(np.arange(code_max + 1), 0.5) / code_max
+    g = 2.2 * np.log(z)
+    middle = g[(code_max + 1) // 2]
+    table = np.repeat((g - middle)[:, None], channels, axis=1)
+    return (CameraResponse(table, code_max, np.ones(table.shape, bool), method="truth"),
+            float(np.exp(middle)))
+
+
+def true_noise(unit: float, channels: int = 3) -> NoiseModel:
+    return NoiseModel(np.full(channels, SHOT / unit), np.full(channels, READ**2 / unit**2),
+                      np.full(channels, QUANTISATION), "truth")
+
+
+@pytest.fixture(scope="module")
+def demo():
+    truth = demo_scene()
+    codes = render_brackets(truth, TIMES, gamma_response, seed=0)
+    stack = ExposureStack.from_arrays(codes, TIMES, files=[f"b{j}.png" for j in range(7)])
+    return truth, stack, well_exposed(codes, 255)
+
+
+def test_fit_recovers_the_renderers_noise(demo):
+    # With the true curve the fit sees the renderer's own noise. Shot noise dominates
+    # every code above ~40: measured 7.5 % high (1.47e-4 against 1.37e-4). Read noise is
+    # seen only through codes near black, where the clipped-off noise makes it look
+    # smaller (measured 0.45x): what matters for the weights is the total standard
+    # deviation, bound within 10 % of the truth at codes 32-250, and the shot term
+    # within 15 %.
+    _, stack, _ = demo
+    response, unit = gamma_truth()
+    fitted = fit_noise(stack.codes, stack.exposures, response)
+    truth = true_noise(unit)
+    assert fitted.source == "fitted" and fitted.pairs > 10_000
+    assert np.allclose(fitted.shot, truth.shot, rtol=0.15), (fitted.shot, truth.shot)
+    sigma = np.sqrt(fitted.exposure_variance(response))[32:251]
+    sigma_true = np.sqrt(truth.exposure_variance(response))[32:251]
+    assert np.max(np.abs(sigma / sigma_true - 1)) < 0.10
+
+
+def test_fit_falls_back_to_quantisation_on_a_flat_scene():
+    codes = np.full((3, 20, 30, 3), 120, np.uint8)
+    response, _ = gamma_truth()
+    fitted = fit_noise(codes, [1, 2, 4], response)
+    assert fitted.source == "quantisation"
+    assert np.all(fitted.code == QUANTISATION) and np.all(fitted.shot == 0)
+
+
+def test_jpeg_brackets_floor_the_code_noise():
+    assert code_variance_floor(["a.JPG", "b.png"]) == JPEG_CODE_VARIANCE
+    assert code_variance_floor(["a.png", "b.tif"]) == QUANTISATION
+
+
+def test_variance_table_and_usable_codes():
+    response, unit = gamma_truth()
+    noise = true_noise(unit)
+    variance = observation_variance(response, TIMES, noise)
+    assert variance.shape == (7, 3, 256) and np.all(variance > 0) and np.all(np.isfinite(variance))
+    # var(x_j) = var(X) / dt_j^2 exactly
+    assert np.allclose(variance[0] * TIMES[0] ** 2, variance[-1] * TIMES[-1] ** 2)
+    usable = usable_codes(response, noise)
+    assert not usable[0].any() and not usable[-1].any() and usable[20:250].all()
+
+
+def test_inverse_variance_reaches_the_noise_aware_bound_on_the_demo(demo):
+    # The issue's measure: hdrio demo's error. Measured, the whole default pipeline
+    # (estimated curve, fitted noise): median 0.74 %, p95 4.2 %, p99 10.8 %, against
+    # 1.82 / 20.9 / 86 % for the log merge; the oracle (true curve, true noise) gives
+    # 0.72 / 4.07 / 9.9 %. Bounds: the issue's (median <= 0.9 %, p99 <= 15 %) and within
+    # 1.15x of the oracle's median and p99.
+    truth, stack, mask = demo
+    result = merge_stack(stack, MergeOptions())
+    ours = radiance_error(result.radiance, truth, mask)
+    response, unit = gamma_truth()
+    oracle, _ = MERGE_METHODS["inverse-variance"](stack, response, noise=true_noise(unit))
+    bound = radiance_error(oracle, truth, mask)
+    assert ours["median"] <= 0.009 and ours["p99"] <= 0.15, ours
+    assert ours["median"] <= 1.15 * bound["median"] and ours["p99"] <= 1.15 * bound["p99"]
+    log = radiance_error(merge_stack(stack, MergeOptions(merge="log")).radiance, truth, mask)
+    assert ours["p99"] < 0.5 * log["p99"]
+
+
+def test_every_estimator_is_registered_and_the_tutorials_merge_keeps_its_name():
+    assert MERGE_METHODS.canonical("Granados2010") == "inverse-variance"
+    assert MERGE_METHODS.canonical("hanji2020") == "Poisson"
+    assert MERGE_METHODS.canonical("tutorial") == "log"
+    assert MergeOptions().merge == "inverse-variance"
+
+
+@pytest.mark.parametrize("method", ["inverse-variance", "Poisson", "log", "linear"])
+def test_estimators_merge_to_finite_positive_radiance(demo, method):
+    # Each is a weighted mean of the same estimates: on the demo every one is within
+    # 3 % median of the truth (measured 0.72-1.9 %), and nothing is non-finite or <= 0.
+    truth, stack, mask = demo
+    radiance = merge_stack(stack, MergeOptions(merge=method)).radiance
+    assert np.all(np.isfinite(radiance)) and np.all(radiance > 0)
+    assert radiance_error(radiance, truth, mask)["median"] < 0.03
+
+
+def test_header_records_the_estimator_and_the_noise_model(demo):
+    from hdrio.pipeline import exr_attributes
+
+    _, stack, _ = demo
+    attributes = exr_attributes(merge_stack(stack, MergeOptions()))
+    assert attributes["hdrio:merge"] == "inverse-variance"
+    assert attributes["hdrio:mergeDomain"] == "linear"
+    assert attributes["hdrio:noiseSource"] == "fitted"
+    assert len(attributes["hdrio:noiseShot"].split(",")) == 3
+
+
+def test_uncertainty_is_calibrated(demo):
+    # In every decile of predicted sigma/E, the r.m.s. measured relative error (after the
+    # global scale) against the r.m.s. prediction: measured 0.98-1.13 on the demo with
+    # the default pipeline (estimated curve, fitted noise). Bound: within 25 % (issue).
+    truth, stack, mask = demo
+    result = merge_stack(stack, MergeOptions(uncertainty=True))
+    error = radiance_error(result.radiance, truth, mask)
+    relative = (result.radiance.astype(np.float64) * error["scale"] / truth - 1)[mask].ravel()
+    predicted = result.uncertainty.astype(np.float64)[mask].ravel()
+    edges = np.quantile(predicted, np.linspace(0, 1, 11))
+    for low, high in zip(edges[:-1], edges[1:]):
+        inside = (predicted >= low) & (predicted <= high)
+        ratio = np.std(relative[inside]) / np.sqrt(np.mean(predicted[inside] ** 2))
+        assert 0.75 <= ratio <= 1.25, (low, high, ratio)
+
+
+def test_uncertainty_of_the_inverse_variance_merge_is_one_over_the_weight_sum(demo):
+    _, stack, _ = demo
+    response, unit = gamma_truth()
+    noise = true_noise(unit)
+    weights = effective_weights("inverse-variance", response, stack.exposures, "Debevec1997",
+                                noise)
+    layer = relative_uncertainty(stack, response, weights, noise)
+    radiance, _ = MERGE_METHODS["inverse-variance"](stack, response, noise=noise)
+    # one pixel by hand: sigma_E = 1 / sqrt(sum_j w_j) over its unsaturated brackets
+    y, x, c = 200, 100, 1
+    z = stack.codes[:, y, x, c]
+    total = 0.0
+    for j, code in enumerate(z):
+        if code == 255:
+            break
+        total += weights[j, c, code]
+    assert total > 0
+    expected = (1 / np.sqrt(total)) / radiance[y, x, c]
+    assert layer[y, x, c] == pytest.approx(expected, rel=1e-3)  # float32 radiance
+
+
+def stress():
+    return settings(max_examples=40, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+
+@stress()
+@given(step=st.floats(-20, 20).filter(lambda s: abs(s) >= 0.05),
+       count=st.integers(2, 20), bits=st.sampled_from([8, 10, 12, 16]),
+       scene=st.sampled_from(["ramp", "flat", "clipped", "black"]),
+       method=st.sampled_from(NOISE_AWARE))
+def test_noise_aware_estimators_never_fail(step, count, bits, scene, method):
+    # Exposure ratios 2^-20..2^20 between neighbours, 2..20 brackets, 8..16 bits, flat and
+    # all-clipped or all-black scenes: the fit and the merge never raise, every value is
+    # finite and positive, and a brighter pixel never merges darker (monotone).
+    exposures = 2.0 ** (step * np.arange(count))
+    exposures = exposures / exposures.max()
+    code_max = 2**bits - 1
+    t = exposures[:, None]
+    if scene == "ramp":
+        radiance = np.geomspace(1e-3 / exposures.max(), 10 / exposures.min(), 64)
+    else:
+        radiance = np.full(64, {"flat": 0.5, "clipped": 1e30, "black": 0.0}[scene])
+    X = np.clip(radiance[None] * t, 0, 1)
+    codes = np.rint(gamma_response(X) * code_max).astype(np.uint16 if bits > 8 else np.uint8)
+    codes = np.repeat(codes[:, None, :, None], 2, axis=1)  # (P, 2, 64, 1)
+    stack = ExposureStack.from_arrays(codes, exposures, code_max=code_max)
+    response, _ = gamma_truth(code_max, 1)
+    noise = fit_noise(stack.codes, stack.exposures, response)
+    assert np.all(np.isfinite(noise.shot)) and np.all(noise.read >= 0)
+    radiance_out, _ = MERGE_METHODS[method](stack, response, noise=noise)
+    assert np.all(np.isfinite(radiance_out)) and np.all(radiance_out > 0)
+    if scene == "ramp":
+        row = radiance_out[0, :, 0]
+        assert np.all(np.diff(row) >= -1e-6 * row[1:])
+
+
+def test_uncertainty_layer_through_the_command_and_check(brackets, out_dir, capsys):
+    from tests.conftest import run_cli as run
+
+    output = out_dir / "u.exr"
+    code, _, err = run(capsys, "merge", *brackets, "-o", output, "--uncertainty")
+    assert code == 0, err
+    import OpenImageIO as oiio
+
+    image = oiio.ImageInput.open(str(output))
+    names = list(image.spec().channelnames)
+    layer = np.asarray(image.read_image("float"))[..., 3:]
+    image.close()
+    assert names == ["R", "G", "B", "uncertainty.R", "uncertainty.G", "uncertainty.B"]
+    assert np.all(np.isfinite(layer)) and np.all(layer > 0)
+    code, out, err = run(capsys, "check", output)
+    assert code == 0, err
+    assert re.search(r"uncertainty:\s+median \d+\.\d+ %", out), out
