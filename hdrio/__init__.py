@@ -7,6 +7,13 @@ pipeline that chains them. ``hdrio`` never imports ``bpy``, ``plugins`` or ``hdr
 
 __version__ = "0.1.0"
 
+import warnings  # noqa: E402
+
+# colour-science warns on import, three lines on stderr, when matplotlib is absent; hdrio
+# needs matplotlib only for its pictures (the plot extra), which say so when it is missing.
+warnings.filterwarnings("ignore", message='"Matplotlib" related API features are not '
+                                          "available")
+
 from hdrio.errors import HdrioError, InputError, ResponseSolveError  # noqa: E402
 from hdrio.io import read_brackets, write_exr  # noqa: E402
 from hdrio.merge import MERGE_METHODS, WEIGHTING_METHODS, merge_brackets  # noqa: E402

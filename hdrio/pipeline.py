@@ -19,7 +19,9 @@ from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
+from hdrio.errors import ResponseSolveError
 from hdrio.io.brackets import read_brackets
+from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.merge.debevec1997 import MergeStatistics
@@ -31,8 +33,9 @@ from hdrio.merge.estimators import (
 )
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
+from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
 from hdrio.response import RESPONSE_METHODS, CameraResponse
-from hdrio.response.stored import read_response
+from hdrio.response.stored import check_response_fits, read_response
 from hdrio.skips import SKIPS, SkipReport, classify
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
@@ -78,6 +81,9 @@ class MergeOptions:
     # written as the EXR layer "uncertainty".
     uncertainty: bool = False
 
+    def __post_init__(self) -> None:
+        check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
+
     @property
     def skips(self) -> frozenset[str]:
         """The skips (:mod:`hdrio.skips`) in force."""
@@ -105,6 +111,24 @@ class MergeResult:
         return dynamic_range_stops(luminance(self.radiance, self.options.colourspace))
 
 
+def describe_set(stack: ExposureStack) -> str:
+    """The files of a stack for a message: ``a.png .. d.png (4 brackets, 32x24, all
+    dark: a.png)``, with the brackets that have no well-exposed pixel named."""
+    height, width = stack.shape[:2]
+    names = [Path(name).name for name in stack.files]
+    span = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]}"
+    notes = [f"{len(names)} brackets of {width}x{height}"]
+    dropped = [Path(name).name for name, _ in stack.dropped]
+    if dropped:
+        notes.append(f"no well-exposed pixel in {', '.join(dropped)}")
+    kinds = [classify(codes, stack.code_max) for codes in stack.codes]
+    for kind, label in (("dark", "all dark"), ("bright", "all bright")):
+        which = [name for name, k in zip(names, kinds) if k == kind]
+        if which:
+            notes.append(f"{label}: {', '.join(which)}")
+    return f"{span} ({'; '.join(notes)})"
+
+
 def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.ndarray | None:
     """Pixels equal to ``colour`` in any bracket (registration borders), else ``None``."""
     if colour is None:
@@ -130,16 +154,26 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     skipped = SkipReport(dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
-    if response is None:
+    if response is not None:
+        check_response_fits(response, stack.code_max, stack.shape[2])
+    else:
         method = "linear" if is_raw_stack(stack) else options.response
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
-        response = RESPONSE_METHODS[method](
-            stack, smoothing=options.smoothing, weighting=options.weighting,
-            sampling=options.sampling, samples=options.samples,
-            exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
-            **({"solve_identical_once": "channels" in skips} if method != "linear" else {}),
-        )
+        try:
+            response = RESPONSE_METHODS[method](
+                stack, smoothing=options.smoothing, weighting=options.weighting,
+                sampling=options.sampling, samples=options.samples,
+                exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
+                **({"solve_identical_once": "channels" in skips} if method != "linear"
+                   else {}),
+            )
+        except ResponseSolveError as error:
+            message = str(error).replace("a saved response", "a saved response "
+                                         "(--response-from EXR, from an earlier merge)")
+            if "--response-from" not in message:
+                message += "; or give a saved response: --response-from EXR"
+            raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -255,9 +289,14 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1].
 
     ``parameters`` go to the operator (e.g. ``key=0.18`` for the Reinhard operators).
+    Greyscale radiance (``(H, W, 1)``) is tone-mapped as grey RGB (its luminance is its
+    one channel, since the weights sum to 1) and encoded as RGB.
     """
     function = TONEMAP_METHODS[operator]
     canonical = TONEMAP_METHODS.canonical(operator)
+    check_tonemap_parameters(canonical, parameters)
+    if radiance.shape[-1] == 1:
+        radiance = np.repeat(radiance, 3, axis=-1)
     if canonical.endswith("tutorial"):
         display = function(radiance.astype(np.float64), **parameters)
     else:
@@ -282,7 +321,12 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     the ``tonemap`` operator.
     """
     say = progress or (lambda message: None)
-    require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
+    # Fail before reading: every input a readable file, given once; outputs named well,
+    # in folders that take a new file.
+    check_inputs(paths)
+    check_outputs([(output, {".exr"}), *([(preview, None)] if preview is not None else [])],
+                  paths)
+    require_scene_linear(options.output_space, options.ocio_config)
     response = None
     if options.response_from is not None and "response" in options.skips:
         response = read_response(options.response_from)

@@ -53,6 +53,7 @@ def plot_response(result, path: str | Path) -> Path:
     response, stack = result.response, result.stack
     figure, axes = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
     codes = np.arange(response.code_max + 1)
+    colours = _CHANNEL_COLOURS if response.channels == 3 else ("0.2",)  # grey: dark grey
     indices = response.parameters.get("sample_indices")
     if indices is not None and len(indices):
         flat = result.radiance.reshape(-1, result.radiance.shape[-1])[indices]
@@ -60,9 +61,9 @@ def plot_response(result, path: str | Path) -> Path:
         for c in range(response.channels):
             x = np.log(flat[None, :, c]) + stack.log_exposures[:, None]
             axes.scatter(x.reshape(-1), samples[:, :, c].reshape(-1), s=2, alpha=0.15,
-                         color=_CHANNEL_COLOURS[c % 3], linewidths=0)
+                         color=colours[c % len(colours)], linewidths=0)
     for c in range(response.channels):
-        axes.plot(response.log_inverse[:, c], codes, color=_CHANNEL_COLOURS[c % 3],
+        axes.plot(response.log_inverse[:, c], codes, color=colours[c % len(colours)],
                   label="RGB"[c] if response.channels == 3 else "Y")
     axes.set_xlabel("log exposure ln(E dt)  (g(z_mid) = 0)")
     axes.set_ylabel("code value z")

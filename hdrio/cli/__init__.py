@@ -1,8 +1,16 @@
-"""The ``hdrio`` command: argument parsing and printing only; the work is in the pipeline."""
+"""The ``hdrio`` command: argument parsing and printing only; the work is in the pipeline.
+
+Exit codes: 0 done; 2 the user's input or options are at fault (one line naming the file
+or option); 1 hdrio's own fault (one line asking for a report; ``HDRIO_DEBUG=1`` shows
+the traceback instead); 130 interrupted; 141 the reader of the output went away (a
+closed pipe, ``hdrio info x.exr | head -1``).
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -11,6 +19,7 @@ from hdrio.cli import colour, commands
 from hdrio.errors import HdrioError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 130, 141
 # Must list every subcommand build_parser() adds; anything else is a chain.
 SUBCOMMANDS = frozenset({"merge", "info", "demo", "check", "export-response"})
 
@@ -31,12 +40,52 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``hdrio``; returns the exit code (2 for bad input, with one line on stderr).
+    """Run ``hdrio``; returns the exit code (see the module's docstring).
 
     ``hdrio COMMAND ...`` runs a subcommand; anything else is an oiiotool-style chain
-    (:mod:`hdrio.cli.chain`).
+    (:mod:`hdrio.cli.chain`). Nothing escapes as a traceback unless ``HDRIO_DEBUG=1``.
     """
-    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        code = _run(list(sys.argv[1:] if argv is None else argv))
+        sys.stdout.flush()  # here, so a closed pipe is caught below, not at exit
+        return code
+    except BrokenPipeError:
+        # Whoever read our output has gone; say nothing more (stdout to /dev/null, so
+        # the interpreter's final flush cannot fail again).
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:
+        print("hdrio: interrupted; outputs written so far are complete", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except OSError as error:
+        if error.filename is None or _debugging():
+            return _internal_error(error)
+        # The system refused a file (disk full, I/O error): the environment, not hdrio.
+        print(f"hdrio: error: {error.filename}: {(error.strerror or str(error)).lower()}",
+              file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as error:  # noqa: BLE001 - the last line of defence
+        return _internal_error(error)
+
+
+def _debugging() -> bool:
+    return os.environ.get("HDRIO_DEBUG", "").strip() not in ("", "0")
+
+
+def _internal_error(error: BaseException) -> int:
+    """hdrio's own fault: one line asking for a report (the traceback with HDRIO_DEBUG=1)."""
+    if _debugging():
+        raise error
+    detail = str(error).strip().splitlines()
+    print(f"hdrio: internal error ({type(error).__name__}"
+          f"{': ' + detail[0] if detail else ''}); this is a bug in hdrio, not a problem "
+          f"with your input: please report it to hdrio's issue tracker with the command "
+          "line and the traceback HDRIO_DEBUG=1 shows", file=sys.stderr)
+    return EXIT_FAILURE
+
+
+def _run(argv: list[str]) -> int:
     if not argv or argv[0] not in SUBCOMMANDS | {"--version"}:
         from hdrio.cli import chain
 
@@ -52,9 +101,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = error.args[0] if isinstance(error, KeyError) and error.args else error
         print(f"hdrio {args.command}: error: {message}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("hdrio: interrupted; no output written", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

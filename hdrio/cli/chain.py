@@ -119,6 +119,10 @@ class Chain:
     def say(self, message: str) -> None:
         print(message, file=self.out)
 
+    def note(self, message: str) -> None:
+        """A one-line note on stderr (input repaired, say), shown even when quiet."""
+        print(f"hdrio: note: {message}", file=sys.stderr)
+
 
 def _split(argv: Sequence[str]) -> list[tuple[str, list[str]]]:
     """Tokens into ``(operation or 'read', arguments)``, checking argument counts."""
@@ -200,10 +204,20 @@ def run_steps(chain: Chain, steps: Sequence[Step]) -> None:
             elif OPERATIONS[step.name].per_set:
                 OPERATIONS[step.name].run(chain, step.value)
         except ChainError as error:
-            raise ChainError(f"{step.text}: {error}") from None
+            raise ChainError(step_message(step, error)) from None
         except (HdrioError, ValueError, KeyError) as error:
             message = error.args[0] if isinstance(error, KeyError) and error.args else error
-            raise ChainError(f"{step.text}: {message}") from None
+            raise ChainError(step_message(step, message)) from None
+
+
+def step_message(step: Step, message: object) -> str:
+    """``step.text: message``, without naming the step's file twice when the message
+    already starts with it (``-o x.exr: folder ... does not exist``)."""
+    message, value = str(message), str(step.value)
+    if step.text.endswith(value) and message.startswith(f"{value}: "):
+        head = step.text[: len(step.text) - len(value)].strip()  # "-o", or "" for a read
+        return f"{head} {message}" if head else message
+    return f"{step.text}: {message}"
 
 
 def help_text() -> str:

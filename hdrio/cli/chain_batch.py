@@ -130,6 +130,7 @@ def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
     from hdrio.batch.grouping import DEFAULT_MAX_GAP_S, group_brackets
     from hdrio.batch.plan import plan_sets
     from hdrio.cli.chain_output import output_path
+    from hdrio.io.paths import check_not_an_input
 
     if not chain.brackets:
         raise ChainError("no brackets to group: give a folder or files before --group")
@@ -145,8 +146,12 @@ def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
     recipe, named = _recipe(steps)
     sets = group_brackets(chain.brackets, settings.get("group_gap", DEFAULT_MAX_GAP_S),
                           settings.get("group_size"))
-    return plan_sets(sets, outputs_for, recipe, named, size=settings.get("group_size"),
-                     force=bool(settings.get("force")), shard=settings.get("shard"))
+    tasks = plan_sets(sets, outputs_for, recipe, named, size=settings.get("group_size"),
+                      force=bool(settings.get("force")), shard=settings.get("shard"))
+    for task in tasks:  # a pattern naming an input is not a finished output
+        for output in task.outputs:
+            check_not_an_input(output, task.files)
+    return tasks
 
 
 # ------------------------------------------------------------------------------- run

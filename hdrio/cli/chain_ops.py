@@ -26,11 +26,10 @@ from hdrio.cli.chain import (
 _one = one_argument
 
 
-def _number(values: list[str]) -> float:
-    try:
-        return float(values[0])
-    except ValueError:
-        raise ValueError(f"not a number: {values[0]!r}") from None
+def _stops(values: list[str]) -> float:
+    from hdrio.numbers import check_number
+
+    return check_number("--exposure", values[0], minimum=-64, maximum=64, hint="stops")
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -39,19 +38,20 @@ def _number(values: list[str]) -> float:
 def read_input(chain: Chain, path: Path) -> None:
     """A positional input: brackets wait for --merge; float images go on the stack."""
     from hdrio.batch.grouping import list_images
+    from hdrio.io.paths import name_too_long
 
-    if path.is_dir():
+    if not name_too_long(path) and path.is_dir():
         files = list_images(path)
         if not files:
             raise ChainError(f"{path}: folder holds no images")
         chain.brackets.extend(files)
         chain.inputs.extend(files)
         return
-    chain.inputs.append(path)
+    chain.inputs.append(path)  # brackets are checked by --merge, images when read
     if path.suffix.lower() in FLOAT_SUFFIXES:
         from hdrio.imageops import read_image
 
-        pixels, header = read_image(path)
+        pixels, header = read_image(path, say=chain.note)
         # Carry what describes the pixels (primaries, hdrio's provenance), not the file's
         # layout attributes (data window, screen window...), which the writer sets anew.
         attributes = {name: value for name, value in header.items()
@@ -101,13 +101,13 @@ def _response_from(chain: Chain, path: str) -> None:
 
 
 def _multipliers(values: list[str]) -> tuple[float, ...]:
-    try:
-        numbers = tuple(float(v) for v in values[0].split(","))
-    except ValueError:
-        raise ValueError("expected R,G,B multipliers, e.g. 2.1,1,1.6") from None
-    if len(numbers) != 3 or min(numbers) <= 0:
-        raise ValueError("expected three positive multipliers R,G,B")
-    return numbers
+    from hdrio.numbers import check_number
+
+    parts = values[0].split(",")
+    if len(parts) != 3:
+        raise ValueError("expected three positive multipliers R,G,B, e.g. 2.1,1,1.6")
+    return tuple(check_number("--white-balance", part, above=0.0,
+                              hint="R,G,B multipliers, e.g. 2.1,1,1.6") for part in parts)
 
 
 @operation("--white-balance", "R,G,B", convert=_multipliers,
@@ -170,7 +170,7 @@ def _merge(chain: Chain, domain: str) -> None:
 # ------------------------------------------------------------------------ image steps
 
 
-@operation("--exposure", "STOPS", convert=_number,
+@operation("--exposure", "STOPS", convert=_stops,
            help="scale the scene-linear image by 2^STOPS", example="--exposure -1.5")
 def _exposure(chain: Chain, stops: float) -> None:
     from hdrio.imageops import apply_exposure
@@ -193,6 +193,9 @@ def _tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
             parameters[key.strip()] = float(text)
         except ValueError:
             raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
+    from hdrio.numbers import check_tonemap_parameters
+
+    check_tonemap_parameters(name, parameters)
     return name, parameters
 
 

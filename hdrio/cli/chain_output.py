@@ -5,20 +5,32 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
-from hdrio.cli.chain import IMAGE_SUFFIXES, Chain, ChainError, Step, one_argument, operation
+from hdrio.cli.chain import (
+    IMAGE_SUFFIXES,
+    Chain,
+    ChainError,
+    Step,
+    one_argument,
+    operation,
+    step_message,
+)
 from hdrio.cli.commands import _check_outputs
 from hdrio.errors import HdrioError
 
 _COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
-_FIELD = re.compile(r"{(\w+)}")
 _one = one_argument
+# The fields a set's output name may use (hdrio.grouping.BracketSet.fields), with
+# stand-in values for checking a pattern before any set is known.
+PATTERN_FIELDS = {"first_stem": "first", "last_stem": "last", "index": "1", "count": "2",
+                  "folder": "."}
 
 
 def _pattern_free(path: Path) -> bool:
-    return not _FIELD.search(str(path))
+    from hdrio.io.paths import is_pattern
+
+    return not is_pattern(path)
 
 
 # ----------------------------------------------------------------------------- output
@@ -54,13 +66,11 @@ def _compression(chain: Chain, value: str) -> None:
 
 def output_path(chain: Chain, text: str) -> Path:
     """``-o`` argument with the set's pattern fields (``{first_stem}``...) filled in."""
+    from hdrio.io.paths import fill_pattern
+
     if _pattern_free(Path(text)):
         return Path(text)
-    try:
-        return Path(text.format(**chain.fields))
-    except (KeyError, IndexError) as error:
-        raise ChainError(f"unknown field {error} in the output name; use {{first_stem}}, "
-                         "{last_stem}, {index}, {count} or {folder}") from None
+    return fill_pattern(text, chain.fields or PATTERN_FIELDS)
 
 
 @operation("-o", "FILE", convert=_one,
@@ -105,12 +115,17 @@ def check_outputs(steps: list[Step]) -> None:
         if suffix not in IMAGE_SUFFIXES | {".exr"}:
             raise ChainError(f"{step.text}: unsupported output type; use .exr, "
                              f"{', '.join(sorted(IMAGE_SUFFIXES))}")
-        if _pattern_free(path):
+        if not _pattern_free(path):
+            try:
+                output_path(Chain(), step.value)  # the pattern's syntax, now
+            except HdrioError as error:
+                raise ChainError(step_message(step, error)) from None
+        else:
             try:
                 _check_outputs(path if suffix == ".exr" else None,
                                None if suffix == ".exr" else path, inputs)
             except HdrioError as error:
-                raise ChainError(f"{step.text}: {error}") from None
+                raise ChainError(step_message(step, error)) from None
 
 
 # ------------------------------------------------------------------------ information

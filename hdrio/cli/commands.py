@@ -9,7 +9,6 @@ import numpy as np
 
 from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
-from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import SATURATION_POLICIES
 from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.weighting import WEIGHTING_METHODS
@@ -113,17 +112,11 @@ def add_merge(sub) -> None:
 
 def _check_outputs(output: Path, preview: Path | None, inputs: list[str]) -> None:
     """Refuse bad output paths before any work, so failures never leave partial files."""
-    for path, allowed in ((output, _WRITABLE), (preview, _PREVIEW)):
-        if path is None:
-            continue
-        if path.suffix.lower() not in allowed:
-            raise HdrioError(f"{path}: unsupported output type; use {', '.join(sorted(allowed))}")
-        if path.is_dir():
-            raise HdrioError(f"{path}: is a folder, not a file name")
-        if not path.parent.is_dir():
-            raise HdrioError(f"{path}: folder {path.parent} does not exist")
-        if any(Path(i).resolve() == path.resolve() for i in inputs):
-            raise HdrioError(f"{path}: output would overwrite an input")
+    from hdrio.io.paths import check_outputs
+
+    check_outputs([(path, allowed) for path, allowed in ((output, _WRITABLE),
+                                                         (preview, _PREVIEW))
+                   if path is not None], inputs)
 
 
 def run_merge(args: argparse.Namespace) -> int:

@@ -66,16 +66,20 @@ class Calibration:
         if self.method not in ("exif", "luminance", "illuminance"):
             raise ValueError(f"unknown calibration method {self.method!r}; use exif, "
                              "luminance or illuminance")
-        if not self.K > 0:
-            raise ValueError(f"meter constant K must be positive, got {self.K}")
+        from hdrio.numbers import check_number
+
+        check_number("--meter-k", self.K, above=0.0,
+                     hint="meter constant K must be positive, in cd s/m^2")
         if self.method != "exif" and self.region is None:
             raise ValueError(f"calibration by {self.method} needs a region x,y,w,h")
-        if self.method == "luminance" and not (self.luminance or 0) > 0:
-            raise ValueError("calibration by luminance needs a positive cd/m^2 value")
-        if self.method == "illuminance" and not (self.illuminance or 0) > 0:
-            raise ValueError("calibration by illuminance needs a positive lux value")
-        if not 0 < self.reflectance <= 1:
-            raise ValueError(f"reflectance must be in (0, 1], got {self.reflectance}")
+        if self.method == "luminance":
+            check_number("--reference-luminance", self.luminance, above=0.0,
+                         hint="calibration by luminance needs a positive cd/m^2 value")
+        if self.method == "illuminance":
+            check_number("--reference-illuminance", self.illuminance, above=0.0,
+                         hint="calibration by illuminance needs a positive lux value")
+        check_number("--reference-reflectance", self.reflectance, above=0.0, maximum=1.0,
+                     hint="a grey card's diffuse reflectance, in (0, 1]")
 
     def describe(self) -> str:
         """One line for the EXR header and the summary."""

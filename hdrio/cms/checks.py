@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.calibration import Region
-from hdrio.errors import HdrioError, InputError
+from hdrio.errors import HdrioError, InputError, library_message
 
 REC709_D65 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLORCHECKER = "ColorChecker24 - After November 2014"
@@ -162,17 +162,21 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     header = read_header(path)
     image = oiio.ImageInput.open(str(path))
     if image is None:
-        raise InputError(path, f"cannot read image ({oiio.geterror().strip()})")
+        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
     try:
         names = list(image.spec().channelnames)
-        if not {"R", "G", "B"} <= set(names):
-            raise InputError(path, f"has channels {','.join(names)}; checks need R, G, B")
+        grey = not {"R", "G", "B"} <= set(names) and "Y" in names
+        if not grey and not {"R", "G", "B"} <= set(names):
+            raise InputError(path, f"has channels {','.join(names)}; checks need R, G, B "
+                                   "(or Y alone)")
         pixels = image.read_image("float")
         if pixels is None:
-            raise InputError(path, f"cannot decode pixels ({image.geterror().strip()})")
+            raise InputError(path, f"cannot decode pixels ({library_message(image.geterror)})")
     finally:
         image.close()
-    rgb = np.asarray(pixels)[..., [names.index(c) for c in "RGB"]]
+    pixels = np.asarray(pixels).reshape(*np.shape(pixels)[:2], len(names))
+    # Greyscale: Y as equal R, G, B (whose luminance is Y whatever the primaries).
+    rgb = pixels[..., [names.index(c) for c in ("YYY" if grey else "RGB")]]
     layer = [names.index(n) for n in names if n.startswith("uncertainty.")]
     chromaticities = tuple(header.get("chromaticities", REC709_D65))
     clipped = header.get("hdrio:clippedFraction")
@@ -181,8 +185,10 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
                           gamut=gamut, chart=chart)
     report.source = str(path)
     if layer:
-        report.uncertainty = uncertainty_summary(np.asarray(pixels)[..., layer])
-    if "chromaticities" not in header:
+        report.uncertainty = uncertainty_summary(pixels[..., layer])
+    if grey:
+        report.notes.append("greyscale (Y): luminance checks only, no colour")
+    elif "chromaticities" not in header:
         report.notes.append("no chromaticities: assumed Rec.709 primaries, D65")
     return report
 

@@ -39,7 +39,13 @@ def luminance_weights(space: str = DEFAULT_SPACE) -> tuple[float, float, float]:
 
 
 def luminance(rgb: np.ndarray, space: str = DEFAULT_SPACE) -> np.ndarray:
-    """Relative luminance ``Y`` of linear ``rgb`` (``(..., 3)``) in ``space``, same units."""
+    """Relative luminance ``Y`` of linear ``rgb`` (``(..., 3)``) in ``space``, same units.
+
+    A greyscale image (``(..., 1)``) is its own luminance: its one channel is returned.
+    """
+    rgb = np.asarray(rgb)
+    if rgb.shape[-1:] == (1,):
+        return np.asarray(rgb[..., 0], dtype=np.float32)
     weights = np.asarray(luminance_weights(space), dtype=np.float32)
     return np.asarray(rgb, dtype=np.float32) @ weights
 

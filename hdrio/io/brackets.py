@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.errors import InputError
+from hdrio.errors import InputError, library_message
 from hdrio.io.exposure import (
     exposure_from_exif,
     exposure_from_filename,
@@ -23,6 +23,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
+from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
 from hdrio.skips import classify
@@ -95,15 +96,14 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
     """
     import OpenImageIO as oiio
 
-    if not path.is_file():
-        raise InputError(path, "no such file")
+    check_input(path)
     with _quiet_native_stderr():
         # Keep stored values: never let a reader premultiply RGB by a translucent alpha.
         config = oiio.ImageSpec()
         config.attribute("oiio:UnassociatedAlpha", 1)
         image = oiio.ImageInput.open(str(path), config)
         if image is None:
-            raise InputError(path, f"cannot read image ({_first_line(oiio.geterror())})")
+            raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
         try:
             spec = image.spec()
             base = str(spec.format)
@@ -156,7 +156,7 @@ def _decode_into(image, header: BracketHeader, out: np.ndarray) -> None:
         rows = image.read_scanlines(0, 0, top, bottom, 0, 0, header.channels, base)
         if rows is None or image.has_error:
             raise InputError(header.path, "cannot decode image "
-                             f"({_first_line(image.geterror()) or 'read failed'})")
+                             f"({library_message(image.geterror) or 'read failed'})")
         out[top:bottom] = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
 
 
@@ -173,11 +173,6 @@ def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
         codes = np.empty(header.shape, dtype=header.dtype)
         _decode_into(image, header, codes)
     return codes, header.code_max, header.exif
-
-
-def _first_line(message: str) -> str:
-    lines = [line for line in message.strip().splitlines() if line.strip()]
-    return lines[0] if lines else ""
 
 
 def read_brackets(
@@ -224,6 +219,7 @@ def read_brackets(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("<no input>", "no images given")
+    check_inputs(paths)  # every name, before any header is read
     raw = [is_raw(path) for path in paths]
     if any(raw) and not all(raw):
         raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "

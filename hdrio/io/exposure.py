@@ -62,11 +62,20 @@ def read_exposure_table(path: str | Path) -> dict[str, float]:
     Names are kept as written (relative paths allowed); lookups match on the name or the
     base name. Raises :class:`InputError` naming the sidecar and the line at fault.
     """
+    from hdrio.io.paths import check_input
+
     path = Path(path)
+    check_input(path, "an exposure list")
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = path.read_bytes().decode("utf-8-sig")
     except OSError as error:
         raise InputError(path, f"cannot read exposure list ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        raise InputError(path, f"not UTF-8 text (byte 0x{error.object[error.start]:02x} at "
+                               f"offset {error.start}); save the exposure list as UTF-8"
+                         ) from None
+    if "\0" in text:
+        raise InputError(path, "holds NUL bytes: not a text exposure list")
     # (line number, content) of the lines that carry data: comments and blanks dropped,
     # numbering kept, so errors point at the line a user sees in an editor.
     lines = [(number, line.split("#", 1)[0].strip())

@@ -4,28 +4,37 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hdrio.errors import InputError
+from hdrio.errors import InputError, library_message
+from hdrio.io.paths import check_input
 
 
 def read_header(path: str | Path) -> dict[str, object]:
     """Attributes of ``path`` by name, plus ``.resolution``, ``.channels`` and ``.format``."""
     import OpenImageIO as oiio
 
+    from hdrio.io.brackets import _quiet_native_stderr
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "no such file")
-    image = oiio.ImageInput.open(str(path))
-    if image is None:
-        raise InputError(path, f"cannot read header ({oiio.geterror().strip()})")
-    try:
-        spec = image.spec()
-        header: dict[str, object] = {
-            ".resolution": f"{spec.width}x{spec.height}",
-            ".channels": ",".join(spec.channelnames),
-            ".format": str(spec.format),
-        }
-        for attribute in spec.extra_attribs:
-            header[attribute.name] = attribute.value
-    finally:
-        image.close()
+    check_input(path)
+    with _quiet_native_stderr():  # libpng and friends: their lines become our one line
+        image = oiio.ImageInput.open(str(path))
+        if image is None:
+            raise InputError(path, f"cannot read header ({library_message(oiio.geterror)})")
+        try:
+            spec = image.spec()
+            header: dict[str, object] = {
+                ".resolution": f"{spec.width}x{spec.height}",
+                ".channels": ",".join(spec.channelnames),
+                ".format": str(spec.format),
+            }
+            for attribute in spec.extra_attribs:
+                try:
+                    header[attribute.name] = attribute.value
+                except UnicodeDecodeError:  # a corrupt text attribute: not worth failing
+                    continue
+        except UnicodeDecodeError:
+            raise InputError(path, "header holds names that are not text: a damaged file"
+                             ) from None
+        finally:
+            image.close()
     return header

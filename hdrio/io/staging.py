@@ -25,8 +25,12 @@ DEFAULT_BUDGET_MB = 256
 
 def budget_bytes() -> int:
     """Bytes of code values kept in ordinary memory before staging to a file."""
+    from hdrio.numbers import check_number
+
     configured = os.environ.get("HDRIO_MEMORY_BUDGET_MB", "").strip()
-    megabytes = float(configured) if configured else DEFAULT_BUDGET_MB
+    megabytes = (check_number("HDRIO_MEMORY_BUDGET_MB", configured, minimum=0.0,
+                              hint="megabytes of decoded brackets kept in memory")
+                 if configured else DEFAULT_BUDGET_MB)
     return int(megabytes * 2**20)
 
 

@@ -1,11 +1,14 @@
 """Write images atomically with OpenImageIO: a temp file beside the target, then rename.
 
 A crash, a full disk or an exception leaves either the previous file or none, never a
-half-written EXR.
+half-written EXR. This module owns the temp names (:func:`temporary_name`): hidden,
+``.<stem>.<8 hex>.partial<suffix>``, the stem shortened so that the name fits the file
+system's limit whenever the output's own name does.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import socket
@@ -16,15 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.errors import HdrioError
+from hdrio.errors import OutputError, library_message
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
 _AGGREGATE_LENGTHS = (2, 3, 9, 16)
-
-
-class OutputError(HdrioError):
-    """An output could not be written (the message names the file)."""
 
 
 @dataclass(frozen=True)
@@ -74,13 +73,6 @@ TEMPORARY_NAME = re.compile(r"^\.(?P<stem>.*)\.(?P<host>[A-Za-z0-9-]+)-(?P<pid>\
                             r"-[0-9a-f]{8}\.partial(?P<suffix>\.[^.]*)?$")
 
 
-def _temporary_beside(path: Path) -> Path:
-    """A hidden temporary name in ``path``'s folder (same file system: rename is atomic):
-    ``.{stem}.{host}-{pid}-{8 hex}.partial{suffix}`` (:data:`TEMPORARY_NAME`)."""
-    return path.with_name(f".{path.stem}.{_HOST}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-                          f".partial{path.suffix}")
-
-
 def temporary_writer(path: str | Path) -> tuple[str, int] | None:
     """``(host, pid)`` of the process writing the temporary file ``path``, or ``None``
     when the name is not one of hdrio's temporary names."""
@@ -93,6 +85,75 @@ def this_writer() -> tuple[str, int]:
     return _HOST, os.getpid()
 
 
+NAME_MAX = 255  # bytes in one file name (Linux, macOS, Windows)
+PARTIAL = ".partial"
+
+
+def temporary_name(path: str | Path, token: str | None = None) -> Path:
+    """A hidden temp name beside ``path`` (same file system: the rename is atomic).
+
+    ``.<stem>.<token>.partial<suffix>`` (:data:`TEMPORARY_NAME`), ``token`` the writer's
+    ``host-pid`` and 8 random hex digits; the stem is cut (on a character boundary) so
+    the name stays within :data:`NAME_MAX` bytes.
+    """
+    path = Path(path)
+    token = token or f"{_HOST}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tail = f".{token}{PARTIAL}{path.suffix}"
+    room = NAME_MAX - 1 - len(os.fsencode(tail))
+    stem = os.fsencode(path.stem)[:max(room, 0)].decode(errors="ignore")
+    return path.with_name(f".{stem}{tail}")
+
+
+def is_temporary_of(path: str | Path, candidate: str | Path) -> bool:
+    """Whether ``candidate`` is a temp name :func:`temporary_name` gives for ``path``."""
+    path, candidate = Path(path), Path(candidate)
+    name = candidate.name
+    if candidate.parent != path.parent or not name.endswith(PARTIAL + path.suffix):
+        return False
+    stem, _, token = name[1:-len(PARTIAL + path.suffix)].rpartition(".")
+    return (TEMPORARY_NAME.match(name) is not None
+            and temporary_name(path, token).name == name)
+
+
+def _os_problem(error: OSError) -> str:
+    return (error.strerror or str(error)).lower()
+
+
+def _claim(path: Path) -> Path:
+    """Create the temp file for ``path`` (exclusively), or say why the folder refuses it."""
+    if not path.parent.is_dir():
+        raise OutputError(f"{path}: folder {path.parent} does not exist")
+    temp = temporary_name(path)
+    try:
+        os.close(os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    except OSError as error:
+        raise OutputError(f"{path}: cannot write in {path.parent} ({_os_problem(error)})"
+                          ) from None
+    return temp
+
+
+def _discard(temp: Path) -> None:
+    """Remove a temp file; never masks the error being raised."""
+    with contextlib.suppress(OSError):
+        os.unlink(temp)
+
+
+def check_writable(path: str | Path) -> None:
+    """Raise :class:`OutputError` unless a file can be created beside ``path`` (its
+    folder exists and takes a new file: permissions, read-only file system, name length).
+
+    The probe is the writer's own temp name, created and removed at once.
+    """
+    _discard(_claim(Path(path)))
+
+
+def _publish(temp: Path, path: Path) -> None:
+    try:
+        os.replace(temp, path)
+    except OSError as error:
+        raise OutputError(f"{path}: cannot replace it ({_os_problem(error)})") from None
+
+
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
                 band: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -100,39 +161,40 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
     Rows go out in bands of 64, each through ``band`` first when given (a conversion
-    applied band by band needs no full-size copy of the image).
+    applied band by band needs no full-size copy of the image). One channel is named
+    ``Y`` (OpenEXR's luminance), three ``R, G, B``.
     """
     import OpenImageIO as oiio
 
     path = Path(path)
-    if not path.parent.is_dir():
-        raise OutputError(f"{path}: folder {path.parent} does not exist")
     height, width, channels = pixels.shape
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
     if channel_names is not None:
         spec.channelnames = tuple(channel_names)
+    elif channels == 1:
+        spec.channelnames = ("Y",)
     for name, value in (attributes or {}).items():
         type_name, stored = _type_of(value)
         spec.attribute(name, oiio.TypeDesc(type_name), stored)
-    temp = _temporary_beside(path)
+    temp = _claim(path)
     try:
         output = oiio.ImageOutput.create(str(temp))
         if output is None:
-            raise OutputError(f"{path}: cannot write this format ({oiio.geterror().strip()})")
+            raise OutputError(f"{path}: cannot write this format "
+                              f"({library_message(oiio.geterror)})")
         try:
             if not output.open(str(temp), spec):
-                raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+                raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
             for top in range(0, height, _ROWS_PER_WRITE):
                 rows = pixels[top: top + _ROWS_PER_WRITE]
                 rows = np.ascontiguousarray(band(rows) if band is not None else rows)
                 if not output.write_scanlines(top, top + rows.shape[0], 0, rows):
-                    raise OutputError(f"{path}: write failed ({output.geterror().strip()})")
+                    raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
         finally:
             output.close()
-        os.replace(temp, path)
+        _publish(temp, path)
     finally:
-        if temp.exists():
-            temp.unlink()
+        _discard(temp)
     return path
 
 
@@ -185,15 +247,12 @@ def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:
 def write_text(path: str | Path, text: str) -> Path:
     """Write a UTF-8 text file (an OCIO config, a LUT) atomically."""
     path = Path(path)
-    if not path.parent.is_dir():
-        raise OutputError(f"{path}: folder {path.parent} does not exist")
-    temp = _temporary_beside(path)
+    temp = _claim(path)
     try:
         temp.write_text(text, encoding="utf-8")
-        os.replace(temp, path)
+        _publish(temp, path)
     except OSError as error:
-        raise OutputError(f"{path}: write failed ({error.strerror})") from None
+        raise OutputError(f"{path}: write failed ({_os_problem(error)})") from None
     finally:
-        if temp.exists():
-            temp.unlink()
+        _discard(temp)
     return path

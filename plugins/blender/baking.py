@@ -8,10 +8,10 @@ The tables come from hdrio's own merge (:func:`hdrio.merge.debevec1997.merge_tab
 the kernel's interface, with the weights of the options' estimator,
 :func:`hdrio.merge.estimators.effective_weights`): per bracket ``j``, channel ``c`` and
 code ``z``, the weight ``w_j(z)`` (the inverse-variance weights of the noise model the
-Solve fitted, by default) and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear domain, ``g(z) -
-ln dt_j`` in the log domain). Whatever weights and domain the options name, the node
-follows: it computes ``sum_j w_j x_j / sum_j w_j`` (then ``exp`` in the log domain) with
-the core's saturation reset and fallback (``merge_graph.py``).
+Solve fitted, by default) and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear
+domain, ``g(z) - ln dt_j`` in the log domain). Whatever weights and domain the options
+name, the node follows: it computes ``sum_j w_j x_j / sum_j w_j`` (then ``exp`` in the
+log domain) with the core's saturation reset and fallback (``merge_graph.py``).
 
 The compositor sees a bracket as code values scaled to [0, 1] (the image read as
 *Non-Color*: ``z = Z / Z_max``). A curve holds values in [0, 1], so each table is stored

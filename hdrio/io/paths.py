@@ -1,0 +1,160 @@
+"""The one place that checks the paths hdrio is given, before any work is done.
+
+Inputs: each must name a readable file (not a folder, not a loop of symbolic links, no
+name longer than the file system allows), and no file may be given twice (through
+another name, a link or a hard link included). Outputs: a name the file system takes, a
+type hdrio writes, in a folder that exists and takes a new file, and never one of the
+inputs. Every failure is an :class:`~hdrio.errors.InputError` or
+:class:`~hdrio.errors.OutputError` naming the path and the problem in one line.
+
+Output name patterns (``-o '{first_stem}_hdr.exr'``) are filled here too
+(:func:`fill_pattern`): only ``{name}`` fields, no Python format syntax.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import re
+import stat
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+from hdrio.errors import InputError, OutputError
+from hdrio.io.write import NAME_MAX, check_writable
+
+_PROBLEMS = {
+    errno.ENOENT: "no such file",
+    errno.ELOOP: "a loop of symbolic links (a link that points back to itself); "
+                 "fix or remove the link",
+    errno.EACCES: "permission denied",
+    errno.ENOTDIR: "a part of the path is a file, not a folder",
+}
+
+
+def _problem(error: OSError) -> str:
+    return _PROBLEMS.get(error.errno or 0, (error.strerror or str(error)).lower())
+
+
+def name_too_long(path: str | Path) -> str | None:
+    """Why ``path`` cannot exist on a POSIX file system (a part over 255 bytes), or None."""
+    for part in Path(path).parts:
+        size = len(os.fsencode(part))
+        if size > NAME_MAX:
+            shown = part if len(part) <= 24 else f"{part[:12]}...{part[-8:]}"
+            return (f"file name too long ({shown!r} is {size} bytes; a name holds at most "
+                    f"{NAME_MAX})")
+    return None
+
+
+def check_input(path: str | Path, what: str = "an image file") -> os.stat_result:
+    """Check that ``path`` is a readable regular file; its ``stat`` (links followed)."""
+    too_long = name_too_long(path)
+    if too_long:
+        raise InputError(path, too_long)
+    try:
+        info = os.stat(path)
+    except OSError as error:
+        raise InputError(path, _problem(error)) from None
+    if stat.S_ISDIR(info.st_mode):
+        raise InputError(path, f"is a folder, not {what}")
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError(path, f"is not a regular file (a device or pipe?), not {what}")
+    if not os.access(path, os.R_OK):
+        raise InputError(path, "permission denied (cannot read it)")
+    return info
+
+
+def check_inputs(paths: Sequence[str | Path], what: str = "an image file") -> list[Path]:
+    """:func:`check_input` each path, and refuse a file given twice (under any name)."""
+    seen: dict[tuple[int, int], Path] = {}
+    checked = []
+    for path in map(Path, paths):
+        info = check_input(path, what)
+        key = (info.st_dev, info.st_ino)
+        if key in seen:
+            same = "" if str(seen[key]) == str(path) else f" (as {seen[key]})"
+            raise InputError(path, f"given twice{same}: give each bracket once")
+        seen[key] = path
+        checked.append(path)
+    return checked
+
+
+def _same_file(path: Path, other: Path) -> bool:
+    try:
+        return os.path.samefile(path, other)
+    except OSError:  # either is missing (or unreachable): compare the names
+        return os.path.realpath(path) == os.path.realpath(other)
+
+
+def check_not_an_input(path: str | Path, inputs: Iterable[str | Path]) -> None:
+    """Refuse an output that is one of ``inputs`` (by name, link or hard link)."""
+    path = Path(path)
+    for source in inputs:
+        if _same_file(path, Path(source)):
+            also = "" if str(source) == str(path) else f" ({source})"
+            raise OutputError(f"{path}: output would overwrite an input{also}; choose "
+                              "another name")
+
+
+def check_output(path: str | Path, inputs: Iterable[str | Path] = (),
+                 suffixes: Iterable[str] | None = None, writable: bool = True) -> Path:
+    """Check an output name before any work; ``suffixes`` (lower case, with the dot)
+    limits its type. ``writable``: also create and remove a temp file beside it."""
+    path = Path(path)
+    too_long = name_too_long(path)
+    if too_long:
+        raise OutputError(f"{path}: {too_long}")
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder, not a file name")
+    if suffixes is not None:
+        allowed = sorted(set(suffixes))
+        if path.suffix.lower() not in allowed:
+            raise OutputError(f"{path}: unsupported output type; use {', '.join(allowed)}")
+    if not path.parent.is_dir():
+        raise OutputError(f"{path}: folder {path.parent} does not exist")
+    check_not_an_input(path, inputs)
+    if writable:
+        check_writable(path)
+    return path
+
+
+def check_outputs(outputs: Iterable[tuple[str | Path, Iterable[str] | None]],
+                  inputs: Sequence[str | Path] = ()) -> None:
+    """:func:`check_output` each ``(path, suffixes)``; two outputs may not share a file."""
+    seen: list[Path] = []
+    for path, suffixes in outputs:
+        path = check_output(path, inputs, suffixes)
+        if any(_same_file(path, other) for other in seen):
+            raise OutputError(f"{path}: named twice as an output")
+        seen.append(path)
+
+
+_FIELD = re.compile(r"{(\w*)}")
+
+
+def is_pattern(text: str | Path) -> bool:
+    """Whether an output name has ``{...}`` fields to fill."""
+    return "{" in str(text) or "}" in str(text)
+
+
+def fill_pattern(text: str | Path, fields: Mapping[str, object]) -> Path:
+    """``text`` with each ``{name}`` replaced by ``fields[name]``.
+
+    Only plain names: ``{0}``, ``{a.b}``, ``{a!r}`` or a lone brace are refused, naming
+    the fields there are (a name pattern is not Python's ``str.format``). The message
+    does not repeat ``text``: the caller names the option that gave it.
+    """
+    text = str(text)
+    known = ", ".join(f"{{{name}}}" for name in fields)
+
+    def field(match: re.Match) -> str:
+        name = match.group(1)
+        if name not in fields:
+            raise OutputError(f"unknown field {{{name}}} in the output name; use {known}")
+        return str(fields[name])
+
+    if any(brace in _FIELD.sub("", text) for brace in "{}"):
+        raise OutputError(f"a brace that is not part of a field {{name}} in the output "
+                          f"name; use {known}")
+    return Path(_FIELD.sub(field, text))
