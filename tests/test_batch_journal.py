@@ -23,7 +23,7 @@ from hdrio.batch import (
 )
 from hdrio.batch.partial import clean_partials
 from hdrio.cli import main
-from hdrio.io.write import _temporary_beside, temporary_writer, this_writer
+from hdrio.io.write import temporary_name, temporary_writer, this_writer
 
 EXPOSURES = ((1 / 64, 1 / 16, 1 / 4), (1 / 32, 1 / 8, 1 / 2))
 
@@ -173,7 +173,7 @@ def _dead_pid() -> int:
 
 def test_only_temporaries_of_dead_writers_on_this_host_are_cleaned(tmp_path):
     host, pid = this_writer()
-    ours = _temporary_beside(tmp_path / "a.exr")
+    ours = temporary_name(tmp_path / "a.exr")
     assert temporary_writer(ours) == (host, pid)
     dead = tmp_path / f".b.{host}-{_dead_pid()}-0123abcd.partial.exr"
     live = tmp_path / f".c.{host}-{pid}-0123abcd.partial.exr"  # this process: being written
