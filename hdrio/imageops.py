@@ -66,10 +66,12 @@ def image_statistics(pixels: np.ndarray, space: str = DEFAULT_SPACE) -> dict[str
     return stats
 
 
-def read_image(path: str | Path) -> tuple[np.ndarray, dict[str, object]]:
+def read_image(path: str | Path, alpha: bool = False):
     """Read a float image (OpenEXR, Radiance HDR, ...) as float32 ``(H, W, C)`` RGB.
 
-    Returns the pixels (alpha and extra channels dropped) and the header attributes.
+    Returns the pixels (alpha and extra channels dropped) and the header attributes; with
+    ``alpha=True``, the pixels and the ``(H, W, 1)`` alpha channel (``None`` if none)
+    instead of the attributes.
     """
     import OpenImageIO as oiio
 
@@ -84,7 +86,15 @@ def read_image(path: str | Path) -> tuple[np.ndarray, dict[str, object]]:
         pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
         if pixels is None or image.has_error:
             raise InputError(path, f"cannot decode image ({image.geterror().strip()})")
+        names = list(spec.channelnames)
+        opacity = None
+        if alpha and "A" in names:
+            index = names.index("A")
+            opacity = image.read_image(0, 0, index, index + 1, oiio.FLOAT)
+            opacity = np.asarray(opacity, dtype=np.float32).reshape(spec.height, spec.width, 1)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, channels)
+    if alpha:
+        return pixels, opacity
     return pixels, {k: v for k, v in header.items() if not k.startswith(".")}

@@ -59,6 +59,8 @@ class MergeOptions:
     ocio_config: str | None = None  # path or ocio:// URI; None: $OCIO, else built-in
     calibration: Calibration | None = None  # None: relative radiance
     white_balance: Region | None = None  # neutral region x, y, w, h; None: camera's
+    # Camera RAW white-balance multipliers R, G, B for the set; None: as shot.
+    raw_multipliers: tuple[float, float, float] | None = None
     # A saved response (an EXR written by hdrio) instead of a solve: hdrio.skips.
     response_from: str | None = None
     # Names in hdrio.skips.SKIPS turned off (all on by default).
@@ -229,18 +231,15 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     return encode_sRGB(display)
 
 
-def merge_files(paths: Sequence[str | Path], output: str | Path, *,
-                preview: str | Path | None = None, tonemap: str = "reinhard-global",
+def merge_paths(paths: Sequence[str | Path], *,
                 exposures: Sequence[float | str] | None = None,
                 exposures_from: str | Path | None = None,
-                options: MergeOptions = MergeOptions(), pixel_type: str = "half",
-                progress: Progress | None = None,
-                read_progress: Callable[[int, int, str], None] | None = None,
-                display_view: tuple[str, str] | None = None) -> MergeResult:
-    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+                options: MergeOptions = MergeOptions(), progress: Progress | None = None,
+                read_progress: Callable[[int, int, str], None] | None = None) -> MergeResult:
+    """Read brackets and merge them (no output written): what every front end calls.
 
-    ``display_view``: render the preview through that OCIO display and view instead of
-    the ``tonemap`` operator.
+    ``result.radiance`` is in the input encoding's linear primaries; see
+    :func:`output_pixels` for the EXR's space.
     """
     say = progress or (lambda message: None)
     require_scene_linear(options.output_space, options.ocio_config)  # fail before reading
@@ -250,7 +249,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     start = time.perf_counter()
     say(f"reading {len(paths)} brackets")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
-                          progress=read_progress, skip_brackets="brackets" in options.skips,
+                          progress=read_progress, white_balance=options.raw_multipliers,
+                          skip_brackets="brackets" in options.skips,
                           stop_when_covered=response is not None
                           and "covered" in options.skips)
     read_time = time.perf_counter() - start
@@ -258,16 +258,64 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     if response is not None:
         result.skipped.response_from = str(options.response_from)
     result.timings["read"] = read_time
+    return result
+
+
+def output_pixels(result: MergeResult) -> np.ndarray:
+    """The merge's radiance in the EXR's working space (``options.output_space``)."""
+    if result.colour is None:
+        return result.radiance
+    return output_radiance(result.radiance, result.colour, result.options.output_space,
+                           result.options.ocio_config)
+
+
+def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, object], *,
+                   pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
+                   alpha: np.ndarray | None = None,
+                   observe: Callable[[np.ndarray], None] | None = None) -> float:
+    """Write scene-linear ``pixels`` as EXR, scaled into half's range when needed.
+
+    ``scale`` is the factor already applied to the merged radiance (``--exposure``);
+    ``hdrio:exposureScale`` (and ``whiteLuminance`` for absolute units) record it times
+    the half-range factor, which is returned. ``alpha`` ``(H, W, 1)``, when given, is
+    written unscaled as channel A. ``observe`` sees each band as stored.
+    """
+    extra = half_safe_scale(pixels) if pixel_type == "half" else 1.0
+    attributes = dict(attributes)
+    attributes["hdrio:exposureScale"] = float(scale * extra)
+    if "whiteLuminance" in attributes:  # OpenEXR: cd/m^2 of RGB (1, 1, 1) as stored
+        attributes["whiteLuminance"] = 1.0 / float(scale * extra)
+    if alpha is not None:  # the band scaling below must leave alpha as it is
+        pixels = np.concatenate([pixels, alpha / np.float32(extra)], axis=-1)
+    write_exr(path, pixels, attributes, pixel_type=pixel_type, compression=compression,
+              scale=extra, observe=observe)
+    return extra
+
+
+def merge_files(paths: Sequence[str | Path], output: str | Path, *,
+                preview: str | Path | None = None, tonemap: str = "reinhard-global",
+                exposures: Sequence[float | str] | None = None,
+                exposures_from: str | Path | None = None,
+                options: MergeOptions = MergeOptions(), pixel_type: str = "half",
+                progress: Progress | None = None,
+                read_progress: Callable[[int, int, str], None] | None = None,
+                display_view: tuple[str, str] | None = None,
+                observe: Callable[[np.ndarray], None] | None = None,
+                tonemap_parameters: dict[str, float] | None = None) -> MergeResult:
+    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+
+    ``display_view``: render the preview through that OCIO display and view instead of
+    the ``tonemap`` operator (with ``tonemap_parameters``). ``observe`` sees each band of
+    the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`).
+    """
+    say = progress or (lambda message: None)
+    result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
+                         options=options, progress=progress, read_progress=read_progress)
     start = time.perf_counter()
-    radiance = result.radiance
-    if result.colour is not None:
-        radiance = output_radiance(radiance, result.colour, options.output_space,
-                                   options.ocio_config)
-    if pixel_type == "half":
-        result.exposure_scale = half_safe_scale(radiance)
     say(f"writing {output}")
-    write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type,
-              scale=result.exposure_scale)
+    result.exposure_scale = write_radiance(output, output_pixels(result),
+                                           exr_attributes(result), pixel_type=pixel_type,
+                                           observe=observe)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()
@@ -275,10 +323,11 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
             say(f"rendering preview ({' / '.join(display_view)})")
             pixels = preview_OCIO_display(
                 result.radiance, result.colour.encoding.linear_interop_id, *display_view,
-                colourspace=options.colourspace, config=options.ocio_config)
+                colourspace=result.options.colourspace, config=options.ocio_config)
         else:
             say(f"tone mapping preview ({tonemap})")
-            pixels = render_preview(result.radiance, tonemap, options.colourspace)
+            pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
+                                    **(tonemap_parameters or {}))
         write_preview(preview, pixels)
         result.timings["preview"] = time.perf_counter() - start
     return result

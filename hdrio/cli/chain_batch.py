@@ -12,14 +12,13 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from hdrio.cli.chain import FLOAT_SUFFIXES, Chain, ChainError, Step, run_steps
+from hdrio.cli.chain_output import output_path
+from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
 
 
 def _set_outputs(steps: list[Step], fields: dict[str, str]) -> list[Path]:
-    from hdrio.cli.chain_output import output_path
-
     probe = Chain(fields=fields)
     return [output_path(probe, step.value) for step in steps if step.name == "-o"]
 
@@ -55,9 +54,13 @@ def _describe(bracket_set) -> str:
             f" .. {bracket_set.frames[-1].path.name}")
 
 
-def _run_set(steps: list[Step], files: list[Path], fields: dict[str, str],
-             settings: dict[str, Any], verbose: bool) -> tuple[bool, str]:
-    """Run ``steps`` on one set (in a worker process); ``(ok, what it printed)``."""
+def run_set(steps: list[Step], files: list[Path], fields: dict[str, str],
+            settings: dict[str, Any], verbose: bool) -> tuple[bool, str]:
+    """Run ``steps`` on one set (in a worker process); ``(ok, what it printed)``.
+
+    Submitted to the pool through ``chain.run_set`` (:func:`hdrio.cli.chain.run_set`,
+    which imports every operation first: a spawned worker starts with none).
+    """
     out = io.StringIO()
     chain = Chain(out=out, progress=Progress(quiet=not verbose), brackets=list(files),
                   settings=dict(settings), fields=fields, inputs=list(files))
@@ -68,7 +71,20 @@ def _run_set(steps: list[Step], files: list[Path], fields: dict[str, str],
     return True, out.getvalue()
 
 
-def run_groups(chain: Chain, step: Step, rest: list[Step]) -> None:
+def _check_group(chain: Chain, _values: list[str]) -> None:
+    if not chain.brackets:
+        raise ChainError("no brackets to group: give a folder or files before --group")
+    if "exposures" in chain.settings:
+        raise ChainError("--exposures cannot serve several sets; use EXIF (the default) "
+                         "or --exposures-from")
+
+
+@operation("--group", rest=True, check=_check_group,
+           help="split the pending brackets into bracket sets (capture time, exposure "
+                "pattern, sequence) and run the rest of the chain on each set, in "
+                "parallel; sets whose outputs are complete are skipped",
+           example="shoot/ --group --merge -o {first_stem}_hdr.exr")
+def run_groups(chain: Chain, _values: list[str], rest: list[Step]) -> None:
     """Split the pending brackets into sets and run ``rest`` on each, in parallel."""
     plan = _plan_sets(chain, rest)
     todo = [entry for entry in plan if entry[3] == "merge"]
@@ -85,7 +101,7 @@ def run_groups(chain: Chain, step: Step, rest: list[Step]) -> None:
     # spawn: OpenImageIO and numba keep thread pools that a fork would copy mid-flight.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(_run_set, rest, bracket_set.files,
+        futures = {pool.submit(chain.run_set or run_set, rest, bracket_set.files,
                                bracket_set.fields(index), chain.settings,
                                not chain.progress.quiet): (index, bracket_set)
                    for index, bracket_set, _outputs, _status in todo}
@@ -106,7 +122,7 @@ def run_groups(chain: Chain, step: Step, rest: list[Step]) -> None:
 
 def print_plan(chain: Chain, steps: list[Step]) -> None:
     """``--dry-run``: the steps, the sets ``--group`` would find, and what would be done."""
-    from hdrio.cli.chain_ops import read_input
+    from hdrio.cli.registry import OPERATIONS
 
     chain.say("plan (dry run, nothing is written):")
     for number, step in enumerate(steps, start=1):
@@ -115,7 +131,7 @@ def print_plan(chain: Chain, steps: list[Step]) -> None:
                     if step.value.suffix.lower() in FLOAT_SUFFIXES else "bracket")
             chain.say(f"  {number}. read {step.value} ({kind})")
             if kind != "image":
-                read_input(chain, step.value)
+                OPERATIONS["read"].run(chain, step.value)
             continue
         chain.say(f"  {number}. {step.text}")
         if step.name == "--group":

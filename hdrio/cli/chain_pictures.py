@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
-from hdrio.cli.chain import Chain, ChainError, operation
 from hdrio.cli.chain_output import output_path
+from hdrio.cli.registry import Chain, ChainError, operation
+
+
+def _check_merge_before(chain: Chain, _name: str) -> None:
+    if chain.last_merge is None:
+        raise ChainError("no merge to draw: put this after --merge")
 
 
 def _latest_merge(chain: Chain):
@@ -24,7 +29,7 @@ def _written(chain: Chain, path) -> None:
 
 
 @operation("--plot-response", "PNG", convert=_picture_name,
-           help="draw the camera response of the latest --merge per channel, with the "
+           check=_check_merge_before, help="draw the camera response of the latest --merge per channel, with the "
                 "samples of the solve", example="--merge --plot-response response.png")
 def _plot_response(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_response
@@ -32,7 +37,7 @@ def _plot_response(chain: Chain, name: str) -> None:
     _written(chain, plot_response(_latest_merge(chain), output_path(chain, name)))
 
 
-@operation("--plot-contribution", "PNG", convert=_picture_name,
+@operation("--plot-contribution", "PNG", convert=_picture_name, check=_check_merge_before,
            help="map which bracket contributed most to each pixel of the latest --merge",
            example="--merge --plot-contribution brackets.png")
 def _plot_contribution(chain: Chain, name: str) -> None:
@@ -42,6 +47,7 @@ def _plot_contribution(chain: Chain, name: str) -> None:
 
 
 @operation("--plot-stops", "PNG", convert=_picture_name,
+           check=lambda chain, _name: chain.top(),
            help="false-colour map of the top image's luminance in stops from its median, "
                 "with a legend", example="--merge --plot-stops stops.png")
 def _plot_stops(chain: Chain, name: str) -> None:
@@ -53,7 +59,7 @@ def _plot_stops(chain: Chain, name: str) -> None:
     _written(chain, plot_stops(image.pixels, output_path(chain, name)))
 
 
-@operation("--contact-sheet", "PNG", convert=_picture_name,
+@operation("--contact-sheet", "PNG", convert=_picture_name, check=_check_merge_before,
            help="the brackets of the latest --merge side by side, with their exposures",
            example="--merge --contact-sheet brackets_sheet.png")
 def _contact_sheet(chain: Chain, name: str) -> None:

@@ -21,6 +21,15 @@ HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
 _AGGREGATE_LENGTHS = (2, 3, 9, 16)
 
 
+@dataclass(frozen=True)
+class Typed:
+    """An attribute value with its OpenImageIO type name (``"float[3]"``, ``"rational2i"``),
+    as read from another file: written back with the same type."""
+
+    type: str
+    value: object
+
+
 class OutputError(HdrioError):
     """An output could not be written (the message names the file)."""
 
@@ -37,6 +46,8 @@ def _type_of(value) -> tuple[str, object]:
     """The OpenImageIO type name and value for an attribute (scalars, strings, arrays)."""
     if isinstance(value, Float2):
         return "float2", (float(value.x), float(value.y))
+    if isinstance(value, Typed):
+        return value.type, value.value
     if isinstance(value, bool):
         return "int", int(value)
     if isinstance(value, int | np.integer):
@@ -111,13 +122,15 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
 
 
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
-              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0) -> Path:
+              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
+              observe: Callable[[np.ndarray], None] | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
     range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
-    :func:`hdrio.pipeline.half_safe_scale`).
+    :func:`hdrio.pipeline.half_safe_scale`). ``observe(rows)``, when given, sees each
+    band exactly as stored (half bands as ``float16``).
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
@@ -128,7 +141,9 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         if factor != 1:
             rows = rows * factor
         if pixel_type == "half":
-            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX)
+            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX).astype(np.float16)
+        if observe is not None:
+            observe(rows)
         return rows
 
     attributes = {"compression": compression, **(attributes or {})}

@@ -1,0 +1,416 @@
+"""One definition of the options that shape a merge, shared by both front ends.
+
+``hdrio merge BRACKETS... OPTIONS -o out.exr`` and the chain ``hdrio BRACKETS... OPTIONS
+--merge -o out.exr`` accept every option of :data:`MERGE_OPTIONS`, with the same name,
+arguments and meaning: :func:`add_arguments` puts them on an argparse parser,
+:mod:`hdrio.cli.chain_merge` registers each as a chain operation that sets up the next
+``--merge``, and both turn the collected values into one
+:class:`~hdrio.pipeline.MergeOptions` with :func:`merge_options` (which checks names,
+colour spaces and combinations before any image is read).
+
+Names follow oiiotool where it has one (``--colorconfig``, ``-d``); older spellings stay
+as aliases (``--ocio-config``).
+
+To add an option, append one :class:`Option` to :data:`MERGE_OPTIONS`::
+
+    Option("--lambda", ("N",), "smoothing", _positive_number, example=("10",),
+           help="smoothness weight lambda of the response solve (default 50)")
+
+``key`` is the :class:`~hdrio.pipeline.MergeOptions` field it sets (add the field there
+if it is new; a key that is not a field must be handled in :func:`merge_options`);
+``convert`` turns the typed arguments (a list of strings) into the value or raises
+``ValueError`` with a message; ``example`` is a valid value, which the help shows and
+the test that both front ends write the same EXR uses. Nothing else needs changing.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from hdrio.errors import HdrioError
+
+
+@dataclass(frozen=True)
+class Option:
+    """One merge option: ``name ARG...`` (a flag when ``arguments`` is empty).
+
+    Attributes
+    ----------
+    name, aliases
+        The spelling in help and older spellings that mean the same.
+    arguments
+        Names of the arguments, as shown in help (``("R,G,B",)``).
+    key
+        Where the value goes: a :class:`~hdrio.pipeline.MergeOptions` field, or one of
+        the keys :func:`merge_options` and the readers handle (``exposures``...).
+    convert
+        ``convert(list_of_argument_strings) -> value``; raises ``ValueError``.
+    example
+        Valid arguments (also used by the front-end equivalence test).
+    repeat
+        The option may be given several times; the values collect in a tuple.
+    scope
+        ``"merge"``: sets up the next merge; ``"global"``: the whole command
+        (the chain's colour operations use it too).
+    """
+
+    name: str
+    arguments: tuple[str, ...]
+    key: str
+    convert: Callable[[list[str]], Any]
+    help: str
+    example: tuple[str, ...]
+    aliases: tuple[str, ...] = ()
+    repeat: bool = False
+    scope: str = "merge"
+    group: str = "response and merge"
+
+    @property
+    def spellings(self) -> tuple[str, ...]:
+        return (self.name, *self.aliases)
+
+    def parse(self, values: list[str]) -> Any:
+        """``convert(values)``; a ``ValueError`` or ``KeyError`` becomes one line naming
+        the option and its arguments."""
+        try:
+            return self.convert(values)
+        except (ValueError, KeyError) as error:
+            message = error.args[0] if error.args else str(error)
+            raise HdrioError(f"{' '.join([self.name, *values])}: {message}") from None
+
+
+# ----------------------------------------------------------------------------- converters
+
+
+def _text(values: list[str]) -> str:
+    return values[0]
+
+
+def _number(values: list[str]) -> float:
+    try:
+        return float(values[0])
+    except ValueError:
+        raise ValueError(f"not a number: {values[0]!r}") from None
+
+
+def _positive_number(values: list[str]) -> float:
+    number = _number(values)
+    if not number > 0:
+        raise ValueError(f"expected a positive number, got {values[0]!r}")
+    return number
+
+
+def _whole(values: list[str]) -> int:
+    try:
+        return int(values[0])
+    except ValueError:
+        raise ValueError(f"expected a whole number, got {values[0]!r}") from None
+
+
+def _positive_whole(values: list[str]) -> int:
+    number = _whole(values)
+    if number < 1:
+        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
+    return number
+
+
+def _integers(count: int, what: str) -> Callable[[list[str]], tuple[int, ...]]:
+    def convert(values: list[str]) -> tuple[int, ...]:
+        try:
+            numbers = tuple(int(v) for v in values[0].split(","))
+        except ValueError:
+            numbers = ()
+        if len(numbers) != count:
+            raise ValueError(f"expected {what}")
+        return numbers
+
+    return convert
+
+
+def _registry(getter: Callable[[], Any]) -> Callable[[list[str]], str]:
+    """A converter to the canonical name in a method registry (``KeyError`` lists them)."""
+
+    def convert(values: list[str]) -> str:
+        return getter().canonical(values[0])
+
+    return convert
+
+
+def _choice(*choices: str) -> Callable[[list[str]], str]:
+    def convert(values: list[str]) -> str:
+        if values[0] not in choices:
+            raise ValueError(f"choose from {', '.join(choices)}")
+        return values[0]
+
+    return convert
+
+
+def _exposure_list(values: list[str]) -> tuple[str, ...]:
+    from hdrio.io.exposure import parse_exposure
+
+    times = tuple(t.strip() for t in values[0].split(","))
+    for text in times:
+        parse_exposure(text)  # a typo fails here, before any image is read
+    return times
+
+
+def white_balance(values: list[str]) -> tuple[float, ...]:
+    """``X,Y,W,H`` (a neutral region, four whole numbers) or ``R,G,B`` (RAW multipliers)."""
+    parts = values[0].split(",")
+    if len(parts) == 4:
+        return _integers(4, "a region X,Y,W,H")(values)
+    try:
+        numbers = tuple(float(v) for v in parts)
+    except ValueError:
+        numbers = ()
+    if len(numbers) != 3 or min(numbers) <= 0:
+        raise ValueError("expected a neutral region X,Y,W,H (whole numbers) or three "
+                         "positive camera RAW multipliers R,G,B")
+    return numbers
+
+
+def _skip_name(values: list[str]) -> str:
+    from hdrio.skips import SKIPS
+
+    if values[0] not in (*SKIPS, "all"):
+        raise ValueError(f"choose from {', '.join(SKIPS)}, all")
+    return values[0]
+
+
+def _encoding_name(values: list[str]) -> str:
+    from hdrio.cms.encoding import encoding
+
+    encoding(values[0])  # raises naming the choices
+    return values[0]
+
+
+def tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
+    """``OPERATOR [NAME=VALUE,...]``: the canonical operator and its parameters, each
+    checked against the operator's signature (so ``white=8`` on an operator without a
+    ``white`` fails here, not after the merge)."""
+    import inspect
+
+    from hdrio.tonemap import TONEMAP_METHODS
+
+    name = TONEMAP_METHODS.canonical(values[0])
+    accepted = [p for p in inspect.signature(TONEMAP_METHODS[name]).parameters
+                if p not in ("rgb", "hdr", "space")]
+    parameters: dict[str, float] = {}
+    for item in values[1].split(",") if len(values) > 1 else []:
+        key, _, text = item.partition("=")
+        key = key.strip()
+        if key not in accepted:
+            raise ValueError(f"{name} has no parameter {key!r}; it takes "
+                             f"{', '.join(accepted)}")
+        try:
+            parameters[key] = float(text)
+        except ValueError:
+            raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
+    return name, parameters
+
+
+def _response_methods():
+    from hdrio.response import RESPONSE_METHODS
+    return RESPONSE_METHODS
+
+
+def _sampling_methods():
+    from hdrio.response import SAMPLING_METHODS
+    return SAMPLING_METHODS
+
+
+def _weighting_methods():
+    from hdrio.merge.weighting import WEIGHTING_METHODS
+    return WEIGHTING_METHODS
+
+
+def _merge_methods():
+    from hdrio.merge import MERGE_METHODS
+    return MERGE_METHODS
+
+
+merge_domain = _registry(_merge_methods)
+
+# ---------------------------------------------------------------------------- the table
+
+_COLOUR = "colour (see docs/colour.md)"
+_EXPOSURE = "exposures"
+
+MERGE_OPTIONS: tuple[Option, ...] = (
+    Option("--exposures", ("LIST",), "exposures", _exposure_list, example=("1/16,1/4,1,4",),
+           group=_EXPOSURE, help="exposure times in seconds, in image order, comma-separated "
+                                 "(1/8,1,8); wins over every other source"),
+    Option("--exposures-from", ("FILE",), "exposures_from", _text, group=_EXPOSURE,
+           example=("exposures.csv",),
+           help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "
+                "list.txt"),
+    Option("--response", ("METHOD",), "response", _registry(_response_methods),
+           example=("linear",),
+           help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
+                "linear TIFF need no solve; RAW always uses it)"),
+    Option("--response-from", ("EXR",), "response_from", _text, example=("earlier.exr",),
+           help="reuse the camera response saved in an EXR hdrio wrote (no solve)"),
+    Option("--lambda", ("N",), "smoothing", _positive_number, example=("10",),
+           help="smoothness weight lambda of the response solve (default 50)"),
+    Option("--samples", ("N",), "samples", _positive_whole, example=("500",),
+           help="pixels sampled for the solve (default 1000; 'tutorial' sampling computes "
+                "its own)"),
+    Option("--sampling", ("METHOD",), "sampling", _registry(_sampling_methods),
+           example=("tutorial",), help="sample selection for the solve (default stratified)"),
+    Option("--weighting", ("METHOD",), "weighting", _registry(_weighting_methods),
+           example=("tutorial",), help="weighting function (default Debevec1997)"),
+    Option("--merge", ("DOMAIN",), "merge", merge_domain, example=("linear",),
+           help="merge domain: log (default) or linear; in a chain, --merge's own optional "
+                "argument"),
+    Option("--saturation", ("POLICY",), "saturation", _choice("channel", "pixel"),
+           example=("pixel",),
+           help="a code at the top of the range drops that channel ('channel', default) or "
+                "the whole pixel ('pixel', the tutorial's) from its bracket and every "
+                "longer one"),
+    Option("--exclude-color", ("R,G,B",), "exclude_colour", _integers(3, "R,G,B codes"),
+           example=("0,0,255",), aliases=("--exclude-colour",),
+           help="never sample pixels of this code value in any bracket (e.g. 0,0,255 for "
+                "registration borders)"),
+    Option("--seed", ("N",), "seed", _whole, example=("7",), help="sampling seed (default 0)"),
+    Option("--no-skip", ("NAME",), "no_skip", _skip_name, example=("all",), repeat=True,
+           help="turn off one of the work skips (repeatable): brackets, covered, response, "
+                "channels, early-stop, or all (see docs/speed.md)"),
+    Option("--colorspace", ("NAME",), "output_space", _text, example=("ACEScg",),
+           group=_COLOUR,
+           help="OpenColorIO scene-linear space of the EXR, e.g. ACEScg, ACES2065-1 "
+                "(default lin_rec709_scene)"),
+    Option("--colorconfig", ("CONFIG",), "ocio_config", _text, scope="global",
+           example=("ocio://cg-config-latest",), aliases=("--ocio-config",), group=_COLOUR,
+           help="OpenColorIO config, file or ocio:// URI (default: $OCIO, else "
+                "ocio://cg-config-latest)"),
+    Option("--input-encoding", ("NAME",), "input_encoding", _encoding_name,
+           example=("Display P3",), group=_COLOUR,
+           help="encoding of the brackets when their ICC profile and EXIF do not say: "
+                "sRGB (default), 'Adobe RGB (1998)', 'Display P3'"),
+    Option("--white-balance", ("X,Y,W,H|R,G,B",), "white_balance", white_balance,
+           example=("8,8,16,16",), group=_COLOUR,
+           help="X,Y,W,H: make this region neutral grey; R,G,B: camera RAW white-balance "
+                "multipliers (default: the camera's as-shot balance)"),
+    Option("--absolute", ("SOURCE",), "absolute", _choice("exif", "luminance", "illuminance"),
+           example=("exif",), group=_COLOUR,
+           help="write cd/m^2: from EXIF (t, N, ISO and --meter-k), or a --reference-region "
+                "of known --reference-luminance, or a grey card of --reference-reflectance "
+                "under --reference-illuminance"),
+    Option("--meter-k", ("K",), "meter_k", _positive_number, example=("14",), group=_COLOUR,
+           help="reflected-light meter calibration constant (default 12.5)"),
+    Option("--reference-region", ("X,Y,W,H",), "reference_region",
+           _integers(4, "a region X,Y,W,H"), example=("8,8,16,16",), group=_COLOUR,
+           help="region of known luminance or of a grey card, for --absolute"),
+    Option("--reference-luminance", ("CD_M2",), "reference_luminance", _positive_number,
+           example=("100",), group=_COLOUR, help="luminance of --reference-region"),
+    Option("--reference-illuminance", ("LUX",), "reference_illuminance", _positive_number,
+           example=("500",), group=_COLOUR, help="illuminance on the grey card"),
+    Option("--reference-reflectance", ("R",), "reference_reflectance", _positive_number,
+           example=("0.18",), group=_COLOUR, help="grey card reflectance (default 0.18)"),
+)
+
+OPTIONS_BY_NAME: dict[str, Option] = {
+    spelling: option for option in MERGE_OPTIONS for spelling in option.spellings}
+_CALIBRATION_KEYS = ("absolute", "meter_k", "reference_region", "reference_luminance",
+                     "reference_illuminance", "reference_reflectance")
+
+
+# --------------------------------------------------------------------------- front ends
+
+
+def add_arguments(parser: argparse.ArgumentParser, skip: Iterable[str] = ()) -> None:
+    """Put every option of :data:`MERGE_OPTIONS` (but those named in ``skip``) on
+    ``parser``; read them back with :func:`settings_from_namespace`."""
+    groups: dict[str, Any] = {}
+    for option in MERGE_OPTIONS:
+        if option.name in skip:
+            continue
+        group = groups.get(option.group) or parser.add_argument_group(option.group)
+        groups[option.group] = group
+        metavar = option.arguments[0] if len(option.arguments) == 1 else option.arguments
+        group.add_argument(*option.spellings, dest=f"option:{option.key}",
+                           nargs=len(option.arguments) if len(option.arguments) > 1 else None,
+                           metavar=metavar, default=argparse.SUPPRESS,
+                           action="append" if option.repeat else "store",
+                           help=f"{option.help} (e.g. {option.name} "
+                                f"{' '.join(option.example)})".replace("%", "%%"))
+
+
+def settings_from_namespace(args: argparse.Namespace) -> dict[str, Any]:
+    """The values :func:`add_arguments` parsed, converted, by key (only those given)."""
+    settings: dict[str, Any] = {}
+    for option in MERGE_OPTIONS:
+        raw = getattr(args, f"option:{option.key}", None)
+        if raw is None:
+            continue
+        items = raw if option.repeat else [raw]
+        values = [option.parse(item if isinstance(item, list) else [item]) for item in items]
+        settings[option.key] = tuple(values) if option.repeat else values[0]
+    return settings
+
+
+def set_value(settings: dict[str, Any], option: Option, value: Any) -> None:
+    """Record ``value`` for ``option`` in ``settings`` (repeatable options accumulate)."""
+    if option.repeat:
+        settings[option.key] = (*settings.get(option.key, ()), value)
+    else:
+        settings[option.key] = value
+
+
+def merge_options(settings: Mapping[str, Any]):
+    """The :class:`~hdrio.pipeline.MergeOptions` for ``settings`` (keys of the table).
+
+    Checks what single values cannot show: the colour space against the config,
+    the ``--absolute`` references, ``--exposures`` with ``--exposures-from``. Raises
+    :class:`~hdrio.errors.HdrioError` naming the option; reads no image.
+    """
+    from hdrio.cms.calibration import Calibration
+    from hdrio.cms.spaces import require_scene_linear
+    from hdrio.pipeline import MergeOptions
+    from hdrio.skips import SKIPS
+
+    if settings.get("exposures") is not None and settings.get("exposures_from") is not None:
+        raise HdrioError("--exposures and --exposures-from: give one of them")
+    known = {f.name for f in fields(MergeOptions)}
+    values = {key: value for key, value in settings.items() if key in known}
+    if "no_skip" in values:
+        values["no_skip"] = tuple(SKIPS) if "all" in values["no_skip"] else values["no_skip"]
+    balance = settings.get("white_balance")
+    if balance is not None and len(balance) == 3:  # R,G,B: camera RAW multipliers
+        values["white_balance"], values["raw_multipliers"] = None, tuple(balance)
+    if settings.get("absolute"):
+        from hdrio.cms.calibration import DEFAULT_K
+
+        values["calibration"] = Calibration(
+            method=settings["absolute"], K=settings.get("meter_k", DEFAULT_K),
+            region=settings.get("reference_region"),
+            luminance=settings.get("reference_luminance"),
+            illuminance=settings.get("reference_illuminance"),
+            reflectance=settings.get("reference_reflectance", 0.18))
+    elif any(key in settings for key in _CALIBRATION_KEYS):
+        given = next(key for key in _CALIBRATION_KEYS if key in settings)
+        raise HdrioError(f"--{given.replace('_', '-')} needs --absolute")
+    response_from = settings.get("response_from")
+    if response_from is not None and Path(response_from).exists():
+        from hdrio.response.stored import read_response
+
+        try:
+            read_response(response_from)  # the header only
+        except HdrioError as error:
+            raise HdrioError(f"--response-from {response_from}: {error}") from None
+    config = settings.get("ocio_config")
+    if config is not None:
+        from hdrio.cms.spaces import load_config
+
+        load_config(config)  # fails here, naming the config, if it cannot be loaded
+    try:
+        values["output_space"] = require_scene_linear(
+            values.get("output_space", MergeOptions.output_space), config)
+    except (HdrioError, KeyError, ValueError) as error:
+        message = error.args[0] if error.args else error
+        raise HdrioError(f"--colorspace {values.get('output_space')}: {message}") from None
+    return MergeOptions(**values)
