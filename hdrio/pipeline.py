@@ -179,8 +179,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:units": "relative",
         "hdrio:exposureScale": float(result.exposure_scale),
         "hdrio:sourceFiles": [str(name) for name in stack.files],
-        # Exact decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
-        "hdrio:exposures": [repr(float(t)) for t in stack.exposures],
+        # Decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
+        "hdrio:exposures": [exposure_text(t) for t in stack.exposures],
         "hdrio:exposureSource": stack.exposure_sources[0],
         "hdrio:codeMax": int(stack.code_max),
         "hdrio:responseMethod": response.method,
@@ -195,6 +195,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    attributes.update(capture_attributes(stack))
     skipped = result.skipped.lines(stack.shape[2])
     if skipped:
         attributes["hdrio:skipped"] = "; ".join(skipped)
@@ -210,6 +211,28 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         codes = np.flatnonzero(response.supported[:, c])
         supported.append(f"{name} {codes[0]}-{codes[-1]}" if codes.size else f"{name} none")
     attributes["hdrio:responseSupport"] = ", ".join(supported)
+    return attributes
+
+
+def exposure_text(seconds: float) -> str:
+    """The shortest decimal that reads back as ``seconds``: ``0.01``, not
+    ``0.009999999776482582``, for a time that EXIF stored as a 32-bit float."""
+    seconds = float(seconds)
+    single = np.float32(seconds)
+    if float(single) == seconds:  # a 32-bit value: its own shortest form
+        return np.format_float_positional(single, unique=True, trim="-")
+    return repr(seconds)
+
+
+def capture_attributes(stack: ExposureStack) -> dict[str, object]:
+    """Capture time and camera of the first bracket, from its EXIF, as OpenImageIO names
+    them (``DateTime`` is EXR's ``capDate``). An unknown time is written as none (an
+    empty ``DateTime``), not as the time of writing."""
+    first = stack.metadata[0] if stack.metadata else {}
+    attributes: dict[str, object] = {"DateTime": str(first.get("DateTimeOriginal") or "")}
+    for name in ("Make", "Model"):
+        if first.get(name):
+            attributes[name] = str(first[name])
     return attributes
 
 

@@ -262,7 +262,7 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--sampling", ("METHOD",), "sampling", _registry(_sampling_methods),
            example=("tutorial",), help="sample selection for the solve (default stratified)"),
     Option("--weighting", ("METHOD",), "weighting", _registry(_weighting_methods),
-           example=("tutorial",), help="weighting function (default Debevec1997)"),
+           example=("tutorial-hat",), help="weighting function (default Debevec1997)"),
     Option("--merge", ("DOMAIN",), "merge", merge_domain, example=("linear",),
            help="merge domain: log (default) or linear; in a chain, --merge's own optional "
                 "argument"),
