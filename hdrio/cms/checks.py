@@ -225,14 +225,24 @@ class StreamingCheck:
             self._counts += np.bincount(positive.view(np.int32) >> _BIN_SHIFT,
                                         minlength=_BINS)
 
-    def _percentile(self, q: float) -> float:
-        cumulative = np.cumsum(self._counts)
-        rank = q / 100.0 * (cumulative[-1] - 1)
-        index = int(np.searchsorted(cumulative, rank + 1))
-        # The bin's centre (bins are 2**-11 wide), clamped to the exact extremes.
+    def _order_statistic(self, cumulative: np.ndarray, k: int) -> float:
+        """The ``k``-th smallest luminance (0-based): its bin's centre, within the
+        exact extremes."""
+        index = int(np.searchsorted(cumulative, k + 1))
         centre = np.array([(index << _BIN_SHIFT) + (1 << (_BIN_SHIFT - 1))],
                           dtype=np.int32).view(np.float32)[0]
-        return float(min(max(float(centre), self._low), self._high))
+        return min(max(float(centre), self._low), self._high)
+
+    def _percentile(self, q: float) -> float:
+        """As ``numpy.percentile`` (linear between order statistics), from the bins."""
+        cumulative = np.cumsum(self._counts)
+        rank = q / 100.0 * (int(cumulative[-1]) - 1)
+        k = int(np.floor(rank))
+        low = self._order_statistic(cumulative, k)
+        if rank == k:
+            return low
+        high = self._order_statistic(cumulative, k + 1)
+        return low + (rank - k) * (high - low)
 
     def report(self, source: str = "", clipped_fraction: float | None = None
                ) -> CheckReport:
