@@ -22,6 +22,7 @@ from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output
 from hdrio.io.brackets import read_brackets
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
+from hdrio.jit import announce
 from hdrio.merge.debevec1997 import MERGE_METHODS, MergeStatistics
 from hdrio.response import RESPONSE_METHODS, CameraResponse
 from hdrio.response.stored import read_response
@@ -117,6 +118,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     start = time.perf_counter()
     if response is None:
         method = "linear" if is_raw_stack(stack) else options.response
+        if method != "linear":
+            announce(say, "response")
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
         response = RESPONSE_METHODS[method](
@@ -141,6 +144,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             metadata=stack.metadata[j:j + 1], kinds=("covers",),
             dropped=stack.dropped + tuple((name, f"{skipped.covering} covers the range")
                                           for name in stack.files if name != stack.files[j]))
+    announce(say, "merge")
     say(f"merging {merged.count} brackets ({options.merge} domain)")
     radiance, statistics = MERGE_METHODS[options.merge](
         merged, response, options.weighting, options.saturation,
@@ -348,6 +352,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 result.radiance, result.colour.encoding.linear_interop_id, *display_view,
                 colourspace=result.options.colourspace, config=options.ocio_config)
         else:
+            if not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"):
+                announce(say, "preview")
             say(f"tone mapping preview ({tonemap})")
             pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
                                     **(tonemap_parameters or {}))
