@@ -14,19 +14,6 @@ from hdrio.cli.registry import OPERATIONS
 from tests.conftest import DEFAULT_EXPOSURES
 from tests.conftest import run_cli as run
 
-# Options that only mean something together with others (all from the same table).
-_WITH = {
-    "--meter-k": ["--absolute", "exif"],
-    "--absolute": [],
-    "--reference-region": ["--absolute", "luminance", "--reference-luminance", "100"],
-    "--reference-luminance": ["--absolute", "luminance", "--reference-region", "8,8,16,16"],
-    "--reference-illuminance": ["--absolute", "illuminance", "--reference-region",
-                                "8,8,16,16"],
-    "--reference-reflectance": ["--absolute", "illuminance", "--reference-region",
-                                "8,8,16,16", "--reference-illuminance", "500"],
-}
-
-
 @pytest.fixture
 def exif_brackets(write_brackets) -> list[Path]:
     """The fixture's ramp brackets with EXIF exposure, aperture and ISO (for --absolute)."""
@@ -37,6 +24,8 @@ def exif_brackets(write_brackets) -> list[Path]:
 
 def _arguments(option, brackets: list[Path], tmp_path: Path, capsys) -> list[str]:
     values = list(option.example)
+    if option.name == "--exposures":
+        values = [",".join(str(t) for t in DEFAULT_EXPOSURES)]
     if option.name == "--exposures-from":
         table = tmp_path / "exposures.csv"
         table.write_text("file,exposure_time_s\n" + "".join(
@@ -46,7 +35,7 @@ def _arguments(option, brackets: list[Path], tmp_path: Path, capsys) -> list[str
         earlier = tmp_path / "earlier.exr"
         assert run(capsys, "merge", *brackets, "-o", earlier, "-q")[0] == 0
         values = [str(earlier)]
-    return [*_WITH.get(option.name, []), option.name, *values]
+    return [*option.needs, option.name, *values]
 
 
 def _exr(path: Path) -> tuple[np.ndarray, dict]:

@@ -62,7 +62,7 @@ def help_text() -> str:
         lines.append(f"  {usage}")
         lines.append(textwrap.fill(op.help, 88, initial_indent=" " * 6,
                                    subsequent_indent=" " * 6))
-        lines.append(f"      e.g. {op.example}")
+        lines.append(f"      e.g. hdrio {op.example}")
     lines += ["", "Errors exit with code 2 and one line naming the operation and argument."]
     return "\n".join(lines)
 

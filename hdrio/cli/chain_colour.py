@@ -52,7 +52,7 @@ def _check_colorconvert(chain: Chain, value: tuple[str, str]) -> None:
            check=_check_colorconvert,
            help="convert the image's pixels from colour space FROM to TO (OpenColorIO names "
                 "or aliases) and record TO in the header",
-           example="in.exr --colorconvert lin_rec709_scene ACEScg -o acescg.exr")
+           example="out.exr --colorconvert lin_rec709_scene ACEScg -o acescg.exr")
 def _colorconvert(chain: Chain, value: tuple[str, str]) -> None:
     source, target = value
     _convert(chain, chain.top(), source, target)

@@ -44,7 +44,7 @@ for _option in MERGE_OPTIONS:
         continue
     _run, _check = _setting(_option)
     operation(_option.name, *_option.arguments, help=_option.help,
-              example=f"{_option.name} {' '.join(_option.example)}",
+              example=_option.chain_example(),
               convert=_option.parse, aliases=_option.aliases,
               per_set=_option.scope != "global", check=_check)(_run)
 

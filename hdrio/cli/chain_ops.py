@@ -3,7 +3,8 @@
 
 To add one, write (and add ``check`` when it can fail on its arguments)::
 
-    @operation("--invert", help="...", example="--invert", check=needs_scene_linear)
+    @operation("--invert", help="...", example="out.exr --invert -o inverted.exr",
+               check=needs_scene_linear)
     def _invert(chain: Chain, _values) -> None:
         image = chain.top()
         image.pixels = some_core_function(image.pixels)
@@ -101,7 +102,7 @@ def read_input(chain: Chain, path: Path) -> None:
 
 
 @operation("--exposure", "STOPS", convert=_number, check=needs_scene_linear,
-           help="scale the scene-linear image by 2^STOPS", example="--exposure -1.5")
+           help="scale the scene-linear image by 2^STOPS", example="out.exr --exposure -1.5 -o darker.exr")
 def _exposure(chain: Chain, stops: float) -> None:
     from hdrio.imageops import apply_exposure
 
@@ -120,7 +121,7 @@ def _tonemap_check(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
            check=_tonemap_check,
            help="tone-map to a display image (sRGB): reinhard-global, reinhard-local, "
                 "their -tutorial variants; optional operator parameters",
-           example="--tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
+           example="out.exr --tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
 def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
     from hdrio.cms.luminance import DEFAULT_SPACE
     from hdrio.cms.spaces import colour_science_name
@@ -148,7 +149,7 @@ def _size(values: list[str]) -> str:
 
 @operation("--resize", "SIZE", convert=_size, check=needs_image,
            help="resample to WIDTHxHEIGHT (a 0 keeps the aspect ratio) or to N%",
-           example="--resize 1024x0")
+           example="out.exr --resize 300x0 -o small.exr")
 def _resize(chain: Chain, size: str) -> None:
     from hdrio.imageops import resize
 

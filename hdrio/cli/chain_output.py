@@ -39,7 +39,7 @@ def _compression_name(values: list[str]) -> str:
 
 @operation("-d", "TYPE", convert=_pixel_type,
            help="pixel type of the following EXR outputs: half (default) or float",
-           example="-d float -o out.exr")
+           example="a.jpg b.jpg c.jpg --merge -d float -o float.exr")
 def _data_type(chain: Chain, value: str) -> None:
     chain.settings["data_type"] = value
 
@@ -47,7 +47,7 @@ def _data_type(chain: Chain, value: str) -> None:
 @operation("--compression", "NAME", convert=_compression_name,
            help=f"compression of the following EXR outputs: {', '.join(_COMPRESSIONS)} "
                 "(default zip; dwaa:45 sets a level)",
-           example="--compression piz -o out.exr")
+           example="a.jpg b.jpg c.jpg --merge --compression piz -o piz.exr")
 def _compression(chain: Chain, value: str) -> None:
     chain.settings["compression"] = value
 
@@ -79,7 +79,7 @@ def _check_output(chain: Chain, text: str) -> None:
            help="write the top image (making missing folders): EXR for scene-linear (with "
                 "hdrio's header; a tone-mapped image is labelled display-referred), JPEG, "
                 "PNG or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
-           example="-o {first_stem}_hdr.exr")
+           example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
     from hdrio.io.write import write_exr, write_preview
     from hdrio.pipeline import write_radiance
@@ -133,7 +133,7 @@ def _check_info(chain: Chain, _values: list[str]) -> None:
 
 
 @operation("--info", help="print what the top image is: size, channels, provenance",
-           example="in.exr --info", check=_check_info)
+           example="out.exr --info", check=_check_info)
 def _info(chain: Chain, _values: list[str]) -> None:
     if not chain.images and chain.brackets:
         chain.say(f"{len(chain.brackets)} brackets waiting for --merge: "
@@ -152,7 +152,7 @@ def _info(chain: Chain, _values: list[str]) -> None:
 
 
 @operation("--stats", help="print per-channel min, max, mean, NaN/Inf/negative counts and "
-                           "the dynamic range in stops", example="--merge --stats",
+                           "the dynamic range in stops", example="a.jpg b.jpg c.jpg --merge --stats",
            check=lambda chain, _values: chain.top())
 def _stats(chain: Chain, _values: list[str]) -> None:
     from hdrio.imageops import image_statistics
@@ -171,7 +171,7 @@ def _stats(chain: Chain, _values: list[str]) -> None:
 
 @operation("-v", help="print each step and its progress on stderr, and a check of each "
                       "merge's EXR as written (as 'hdrio check' prints it)",
-           example="-v a.jpg ...", per_set=False)
+           example="-v a.jpg b.jpg c.jpg --merge -o out.exr", per_set=False)
 def _verbose(chain: Chain, _values: list[str]) -> None:
     chain.progress.quiet = False
     chain.settings["report"] = True
@@ -185,7 +185,7 @@ def _count(values: list[str]) -> int:
 
 @operation("--threads", "N", convert=_count, per_set=False,
            help="threads for OpenImageIO, and processes for merging bracket sets (--group)",
-           example="--threads 4")
+           example="--threads 4 a.jpg b.jpg c.jpg --merge -o out.exr")
 def _threads(chain: Chain, count: int) -> None:
     import OpenImageIO as oiio
 

@@ -30,7 +30,7 @@ def _written(chain: Chain, path) -> None:
 
 @operation("--plot-response", "PNG", convert=_picture_name,
            check=_check_merge_before, help="draw the camera response of the latest --merge per channel, with the "
-                "samples of the solve", example="--merge --plot-response response.png")
+                "samples of the solve", example="a.jpg b.jpg c.jpg --merge --plot-response response.png")
 def _plot_response(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_response
 
@@ -39,7 +39,7 @@ def _plot_response(chain: Chain, name: str) -> None:
 
 @operation("--plot-contribution", "PNG", convert=_picture_name, check=_check_merge_before,
            help="map which bracket contributed most to each pixel of the latest --merge",
-           example="--merge --plot-contribution brackets.png")
+           example="a.jpg b.jpg c.jpg --merge --plot-contribution brackets.png")
 def _plot_contribution(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_contribution
 
@@ -49,7 +49,7 @@ def _plot_contribution(chain: Chain, name: str) -> None:
 @operation("--plot-stops", "PNG", convert=_picture_name,
            check=lambda chain, _name: chain.top(),
            help="false-colour map of the top image's luminance in stops from its median, "
-                "with a legend", example="--merge --plot-stops stops.png")
+                "with a legend", example="a.jpg b.jpg c.jpg --merge --plot-stops stops.png")
 def _plot_stops(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_stops
 
@@ -61,7 +61,7 @@ def _plot_stops(chain: Chain, name: str) -> None:
 
 @operation("--contact-sheet", "PNG", convert=_picture_name, check=_check_merge_before,
            help="the brackets of the latest --merge side by side, with their exposures",
-           example="--merge --contact-sheet brackets_sheet.png")
+           example="a.jpg b.jpg c.jpg --merge --contact-sheet brackets_sheet.png")
 def _contact_sheet(chain: Chain, name: str) -> None:
     from hdrio.plots import contact_sheet
 

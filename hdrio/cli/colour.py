@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from hdrio.cms.calibration import Region
+from hdrio.errors import HdrioError
 
 
 def _region(text: str) -> Region:
@@ -24,7 +25,7 @@ def add_check(sub) -> None:
         description="Dynamic range, negative and non-finite pixels, out-of-gamut fraction, "
                     "luminance from the file's own chromaticities, clipping per bracket "
                     "(from hdrio's header), and ColorChecker Delta E 2000 for a chart region.",
-        epilog="example: hdrio check room.exr --chart 120,300,180,120")
+        epilog="example: hdrio check room.exr --chart 120,200,180,120")
     parser.add_argument("files", nargs="+", help="OpenEXR files")
     parser.add_argument("--chart", type=_region, metavar="X,Y,W,H",
                         help="region of a ColorChecker 24 (4 rows of 6, dark row at the "
@@ -53,11 +54,12 @@ def add_export_response(sub) -> None:
                     "CLF) and an OCIO config (the project's, plus the camera's colour "
                     "space), so oiiotool, Nuke or Blender linearise that camera's images "
                     "as hdrio does.",
-        epilog="example: hdrio export-response memorial.exr -o memorial_ocio --name "
-               "memorial; oiiotool --colorconfig memorial_ocio/config.ocio in.png "
-               "--colorconvert memorial lin_rec709 -o linear.exr")
+        epilog="example: hdrio export-response room.exr -o room_ocio --name mycam; "
+               "oiiotool --colorconfig room_ocio/config.ocio in.png --colorconvert mycam "
+               "lin_rec709 -o linear.exr")
     parser.add_argument("exr", help="an EXR written by hdrio merge")
-    parser.add_argument("-o", "--output-dir", required=True, help="folder for LUT and config")
+    parser.add_argument("-o", "--output-dir", required=True,
+                        help="folder for LUT and config (made if missing)")
     parser.add_argument("--name", default="camera", help="colour space name (default %(default)s)")
     parser.add_argument("--format", choices=["spi1d", "clf"], default="spi1d",
                         help="LUT format (default %(default)s)")
@@ -66,7 +68,14 @@ def add_export_response(sub) -> None:
 
 def run_export_response(args: argparse.Namespace) -> int:
     from hdrio.cms.lut import export_response
+    from hdrio.response.stored import read_response
 
+    read_response(args.exr)  # an EXR without a response fails before any folder is made
+    try:
+        Path(args.output_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise HdrioError(f"{args.output_dir}: cannot make the folder ({error.strerror})"
+                         ) from None
     written = export_response(args.exr, args.output_dir, name=args.name, lut_format=args.format)
     for path in written:
         print(f"wrote: {path}")

@@ -26,6 +26,7 @@ the test that both front ends write the same EXR uses. Nothing else needs changi
 from __future__ import annotations
 
 import argparse
+import shlex
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -68,10 +69,20 @@ class Option:
     repeat: bool = False
     scope: str = "merge"
     group: str = "response and merge"
+    needs: tuple[str, ...] = ()  # other options it only makes sense with (for examples)
 
     @property
     def spellings(self) -> tuple[str, ...]:
         return (self.name, *self.aliases)
+
+    def chain_example(self) -> str:
+        """A whole chain using the option (what ``hdrio --help`` shows after ``hdrio``)."""
+        if self.name == "--merge":
+            words = ["a.jpg", "b.jpg", "c.jpg", "--merge", *self.example]
+        else:
+            words = ["a.jpg", "b.jpg", "c.jpg", *self.needs, self.name, *self.example,
+                     "--merge"]
+        return shlex.join([*words, "-o", "out.exr"])
 
     def parse(self, values: list[str]) -> Any:
         """``convert(values)``; a ``ValueError`` or ``KeyError`` becomes one line naming
@@ -241,7 +252,7 @@ _COLOUR = "colour (see docs/colour.md)"
 _EXPOSURE = "exposures"
 
 MERGE_OPTIONS: tuple[Option, ...] = (
-    Option("--exposures", ("LIST",), "exposures", _exposure_list, example=("1/16,1/4,1,4",),
+    Option("--exposures", ("LIST",), "exposures", _exposure_list, example=("1/8,1,8",),
            group=_EXPOSURE, help="exposure times in seconds, in image order, comma-separated "
                                  "(1/8,1,8); wins over every other source"),
     Option("--exposures-from", ("FILE",), "exposures_from", _text, group=_EXPOSURE,
@@ -252,7 +263,7 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            example=("linear",),
            help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
                 "linear TIFF need no solve; RAW always uses it)"),
-    Option("--response-from", ("EXR",), "response_from", _text, example=("earlier.exr",),
+    Option("--response-from", ("EXR",), "response_from", _text, example=("out.exr",),
            help="reuse the camera response saved in an EXR hdrio wrote (no solve)"),
     Option("--lambda", ("N",), "smoothing", _positive_number, example=("10",),
            help="smoothness weight lambda of the response solve (default 50)"),
@@ -301,16 +312,22 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "of known --reference-luminance, or a grey card of --reference-reflectance "
                 "under --reference-illuminance"),
     Option("--meter-k", ("K",), "meter_k", _positive_number, example=("14",), group=_COLOUR,
+           needs=("--absolute", "exif"),
            help="reflected-light meter calibration constant (default 12.5)"),
     Option("--reference-region", ("X,Y,W,H",), "reference_region",
            _integers(4, "a region X,Y,W,H"), example=("8,8,16,16",), group=_COLOUR,
+           needs=("--absolute", "luminance", "--reference-luminance", "100"),
            help="region of known luminance or of a grey card, for --absolute"),
     Option("--reference-luminance", ("CD_M2",), "reference_luminance", _positive_number,
-           example=("100",), group=_COLOUR, help="luminance of --reference-region"),
+           example=("100",), group=_COLOUR,
+           needs=("--absolute", "luminance", "--reference-region", "8,8,16,16"), help="luminance of --reference-region"),
     Option("--reference-illuminance", ("LUX",), "reference_illuminance", _positive_number,
-           example=("500",), group=_COLOUR, help="illuminance on the grey card"),
+           example=("500",), group=_COLOUR,
+           needs=("--absolute", "illuminance", "--reference-region", "8,8,16,16"), help="illuminance on the grey card"),
     Option("--reference-reflectance", ("R",), "reference_reflectance", _positive_number,
-           example=("0.18",), group=_COLOUR, help="grey card reflectance (default 0.18)"),
+           example=("0.18",), group=_COLOUR,
+           needs=("--absolute", "illuminance", "--reference-region", "8,8,16,16",
+                  "--reference-illuminance", "500"), help="grey card reflectance (default 0.18)"),
 )
 
 OPTIONS_BY_NAME: dict[str, Option] = {
@@ -337,7 +354,7 @@ def add_arguments(parser: argparse.ArgumentParser, skip: Iterable[str] = ()) -> 
                            metavar=metavar, default=argparse.SUPPRESS,
                            action="append" if option.repeat else "store",
                            help=f"{option.help} (e.g. {option.name} "
-                                f"{' '.join(option.example)})".replace("%", "%%"))
+                                f"{shlex.join(option.example)})".replace("%", "%%"))
 
 
 def settings_from_namespace(args: argparse.Namespace) -> dict[str, Any]:
