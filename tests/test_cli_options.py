@@ -14,6 +14,7 @@ from hdrio.cli.registry import OPERATIONS
 from tests.conftest import DEFAULT_EXPOSURES
 from tests.conftest import run_cli as run
 
+
 @pytest.fixture
 def exif_brackets(write_brackets) -> list[Path]:
     """The fixture's ramp brackets with EXIF exposure, aperture and ISO (for --absolute)."""
@@ -137,3 +138,36 @@ def test_dry_run_checks_what_a_run_would(brackets, out_dir, capsys):
     code, _, err = run(capsys, *brackets, "--merge", "-o", out_dir / "a.exr",
                        "--colorspace", "nope", "-o", out_dir / "b.exr", "--dry-run")
     assert code == 2 and "--colorspace nope" in err, err
+
+
+def test_cli_modules_import_one_way():
+    """No import circle in hdrio/cli (imports inside functions count too): the operation
+    modules import the registry and the option table, never the chain that runs them."""
+    import ast
+
+    from benchmarks.truth.scenes import REPO_ROOT
+
+    folder = REPO_ROOT / "hdrio" / "cli"
+    graph: dict[str, set[str]] = {}
+    for path in folder.glob("*.py"):
+        name = f"hdrio.cli.{path.stem}" if path.stem != "__init__" else "hdrio.cli"
+        imported = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                if node.module == "hdrio.cli":
+                    imported |= {f"hdrio.cli.{alias.name}" for alias in node.names}
+                elif node.module.startswith("hdrio.cli."):
+                    imported.add(node.module)
+        graph[name] = imported - {name}
+
+    def visit(name: str, path: tuple[str, ...]) -> None:
+        assert name not in path, " -> ".join((*path, name))
+        for other in graph.get(name, ()):
+            visit(other, (*path, name))
+
+    for name in graph:
+        if name != "hdrio.cli":  # the entry point imports the chain lazily, nothing back
+            visit(name, ())
+    for name in ("chain_merge", "chain_ops", "chain_colour", "chain_output",
+                 "chain_pictures", "chain_batch", "options", "registry"):
+        assert "hdrio.cli.chain" not in graph[f"hdrio.cli.{name}"], name

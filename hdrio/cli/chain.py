@@ -18,9 +18,14 @@ from pathlib import Path
 from typing import Any
 
 # The operation modules, in the order --help lists them (importing registers them).
-from hdrio.cli import chain_merge, chain_ops  # noqa: F401  (inputs, merge, image steps)
-from hdrio.cli import chain_colour, chain_output, chain_pictures  # noqa: F401
-from hdrio.cli import chain_batch
+from hdrio.cli import (  # noqa: F401  (inputs, merge, image steps)  # noqa: F401
+    chain_batch,
+    chain_colour,
+    chain_merge,
+    chain_ops,
+    chain_output,
+    chain_pictures,
+)
 from hdrio.cli.chain_merge import PENDING
 from hdrio.cli.progress import Progress
 from hdrio.cli.registry import OPERATIONS, Chain, ChainError, Step, parse, run_steps, validate

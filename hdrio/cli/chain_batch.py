@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from hdrio.cli.chain_output import output_path
-from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.cli.progress import Progress
+from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.errors import HdrioError
 
 

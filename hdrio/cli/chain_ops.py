@@ -102,7 +102,8 @@ def read_input(chain: Chain, path: Path) -> None:
 
 
 @operation("--exposure", "STOPS", convert=_number, check=needs_scene_linear,
-           help="scale the scene-linear image by 2^STOPS", example="out.exr --exposure -1.5 -o darker.exr")
+           help="scale the scene-linear image by 2^STOPS",
+           example="out.exr --exposure -1.5 -o darker.exr")
 def _exposure(chain: Chain, stops: float) -> None:
     from hdrio.imageops import apply_exposure
 

@@ -152,7 +152,8 @@ def _info(chain: Chain, _values: list[str]) -> None:
 
 
 @operation("--stats", help="print per-channel min, max, mean, NaN/Inf/negative counts and "
-                           "the dynamic range in stops", example="a.jpg b.jpg c.jpg --merge --stats",
+                           "the dynamic range in stops",
+           example="a.jpg b.jpg c.jpg --merge --stats",
            check=lambda chain, _values: chain.top())
 def _stats(chain: Chain, _values: list[str]) -> None:
     from hdrio.imageops import image_statistics

@@ -29,8 +29,10 @@ def _written(chain: Chain, path) -> None:
 
 
 @operation("--plot-response", "PNG", convert=_picture_name,
-           check=_check_merge_before, help="draw the camera response of the latest --merge per channel, with the "
-                "samples of the solve", example="a.jpg b.jpg c.jpg --merge --plot-response response.png")
+           check=_check_merge_before,
+           help="draw the camera response of the latest --merge per channel, with the "
+                "samples of the solve",
+           example="a.jpg b.jpg c.jpg --merge --plot-response response.png")
 def _plot_response(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_response
 
