@@ -171,3 +171,17 @@ def test_cli_modules_import_one_way():
     for name in ("chain_merge", "chain_ops", "chain_colour", "chain_output",
                  "chain_pictures", "chain_batch", "options", "registry"):
         assert "hdrio.cli.chain" not in graph[f"hdrio.cli.{name}"], name
+
+
+def test_no_library_warning_without_matplotlib(brackets, tmp_path):
+    """colour-science's Matplotlib warning is not printed on every run."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['matplotlib'] = None\n"
+            "from hdrio.cli import main\n"
+            f"sys.exit(main(['merge', *{[str(b) for b in brackets]!r}, '-o', "
+            f"{str(tmp_path / 'x.exr')!r}, '-q']))")
+    completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert completed.returncode == 0, completed.stderr
+    assert "Warning" not in completed.stderr, completed.stderr
