@@ -19,15 +19,8 @@ import numpy as np
 
 from hdrio.cli.options import tonemap_arguments
 from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Image, operation
+from hdrio.cli.values import number
 from hdrio.errors import HdrioError
-
-
-def _number(values: list[str]) -> float:
-    try:
-        return float(values[0])
-    except ValueError:
-        raise ValueError(f"not a number: {values[0]!r}") from None
-
 
 # ----------------------------------------------------------------------------- inputs
 
@@ -101,7 +94,7 @@ def read_input(chain: Chain, path: Path) -> None:
 # ------------------------------------------------------------------------ image steps
 
 
-@operation("--exposure", "STOPS", convert=_number, check=needs_scene_linear,
+@operation("--exposure", "STOPS", convert=number, check=needs_scene_linear,
            help="scale the scene-linear image by 2^STOPS",
            example="out.exr --exposure -1.5 -o darker.exr")
 def _exposure(chain: Chain, stops: float) -> None:

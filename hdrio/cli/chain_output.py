@@ -11,6 +11,7 @@ import numpy as np
 
 from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, check_output, make_parent
 from hdrio.cli.registry import Chain, ChainError, Image, one_argument, operation
+from hdrio.cli.values import positive_whole
 
 _COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
 _FIELD = re.compile(r"{(\w+)}")
@@ -178,13 +179,7 @@ def _verbose(chain: Chain, _values: list[str]) -> None:
     chain.settings["report"] = True
 
 
-def _count(values: list[str]) -> int:
-    if not values[0].isdigit() or int(values[0]) < 1:
-        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
-    return int(values[0])
-
-
-@operation("--threads", "N", convert=_count, per_set=False,
+@operation("--threads", "N", convert=positive_whole, per_set=False,
            help="threads for OpenImageIO, and processes for merging bracket sets (--group)",
            example="--threads 4 a.jpg b.jpg c.jpg --merge -o out.exr")
 def _threads(chain: Chain, count: int) -> None:

@@ -13,7 +13,7 @@ as aliases (``--ocio-config``).
 
 To add an option, append one :class:`Option` to :data:`MERGE_OPTIONS`::
 
-    Option("--lambda", ("N",), "smoothing", _positive_number, example=("10",),
+    Option("--lambda", ("N",), "smoothing", positive_number, example=("10",),
            help="smoothness weight lambda of the response solve (default 50)")
 
 ``key`` is the :class:`~hdrio.pipeline.MergeOptions` field it sets (add the field there
@@ -32,7 +32,28 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from hdrio.cli.values import (
+    choice,
+    encoding_name,
+    exposure_list,
+    integers,
+    merge_domain,
+    positive_number,
+    positive_whole,
+    registry,
+    response_methods,
+    sampling_methods,
+    skip_name,
+    text,
+    tonemap_arguments,
+    weighting_methods,
+    white_balance,
+    whole,
+)
 from hdrio.errors import HdrioError
+
+__all__ = ["MERGE_OPTIONS", "OPTIONS_BY_NAME", "Option", "add_arguments", "merge_domain",
+           "merge_options", "set_value", "settings_from_namespace", "tonemap_arguments"]
 
 
 @dataclass(frozen=True)
@@ -94,211 +115,59 @@ class Option:
             raise HdrioError(f"{' '.join([self.name, *values])}: {message}") from None
 
 
-# ----------------------------------------------------------------------------- converters
-
-
-def _text(values: list[str]) -> str:
-    return values[0]
-
-
-def _number(values: list[str]) -> float:
-    try:
-        return float(values[0])
-    except ValueError:
-        raise ValueError(f"not a number: {values[0]!r}") from None
-
-
-def _positive_number(values: list[str]) -> float:
-    number = _number(values)
-    if not number > 0:
-        raise ValueError(f"expected a positive number, got {values[0]!r}")
-    return number
-
-
-def _whole(values: list[str]) -> int:
-    try:
-        return int(values[0])
-    except ValueError:
-        raise ValueError(f"expected a whole number, got {values[0]!r}") from None
-
-
-def _positive_whole(values: list[str]) -> int:
-    number = _whole(values)
-    if number < 1:
-        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
-    return number
-
-
-def _integers(count: int, what: str) -> Callable[[list[str]], tuple[int, ...]]:
-    def convert(values: list[str]) -> tuple[int, ...]:
-        try:
-            numbers = tuple(int(v) for v in values[0].split(","))
-        except ValueError:
-            numbers = ()
-        if len(numbers) != count:
-            raise ValueError(f"expected {what}")
-        return numbers
-
-    return convert
-
-
-def _registry(getter: Callable[[], Any]) -> Callable[[list[str]], str]:
-    """A converter to the canonical name in a method registry (``KeyError`` lists them)."""
-
-    def convert(values: list[str]) -> str:
-        return getter().canonical(values[0])
-
-    return convert
-
-
-def _choice(*choices: str) -> Callable[[list[str]], str]:
-    def convert(values: list[str]) -> str:
-        if values[0] not in choices:
-            raise ValueError(f"choose from {', '.join(choices)}")
-        return values[0]
-
-    return convert
-
-
-def _exposure_list(values: list[str]) -> tuple[str, ...]:
-    from hdrio.io.exposure import parse_exposure
-
-    times = tuple(t.strip() for t in values[0].split(","))
-    for text in times:
-        parse_exposure(text)  # a typo fails here, before any image is read
-    return times
-
-
-def white_balance(values: list[str]) -> tuple[float, ...]:
-    """``X,Y,W,H`` (a neutral region, four whole numbers) or ``R,G,B`` (RAW multipliers)."""
-    parts = values[0].split(",")
-    if len(parts) == 4:
-        return _integers(4, "a region X,Y,W,H")(values)
-    try:
-        numbers = tuple(float(v) for v in parts)
-    except ValueError:
-        numbers = ()
-    if len(numbers) != 3 or min(numbers) <= 0:
-        raise ValueError("expected a neutral region X,Y,W,H (whole numbers) or three "
-                         "positive camera RAW multipliers R,G,B")
-    return numbers
-
-
-def _skip_name(values: list[str]) -> str:
-    from hdrio.skips import SKIPS
-
-    if values[0] not in (*SKIPS, "all"):
-        raise ValueError(f"choose from {', '.join(SKIPS)}, all")
-    return values[0]
-
-
-def _encoding_name(values: list[str]) -> str:
-    from hdrio.cms.encoding import encoding
-
-    encoding(values[0])  # raises naming the choices
-    return values[0]
-
-
-def tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
-    """``OPERATOR [NAME=VALUE,...]``: the canonical operator and its parameters, each
-    checked against the operator's signature (so ``white=8`` on an operator without a
-    ``white`` fails here, not after the merge)."""
-    import inspect
-
-    from hdrio.tonemap import TONEMAP_METHODS
-
-    name = TONEMAP_METHODS.canonical(values[0])
-    accepted = [p for p in inspect.signature(TONEMAP_METHODS[name]).parameters
-                if p not in ("rgb", "hdr", "space")]
-    parameters: dict[str, float] = {}
-    for item in values[1].split(",") if len(values) > 1 else []:
-        key, _, text = item.partition("=")
-        key = key.strip()
-        if key not in accepted:
-            raise ValueError(f"{name} has no parameter {key!r}; it takes "
-                             f"{', '.join(accepted)}")
-        try:
-            parameters[key] = float(text)
-        except ValueError:
-            raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
-    return name, parameters
-
-
-def _response_methods():
-    from hdrio.response import RESPONSE_METHODS
-    return RESPONSE_METHODS
-
-
-def _sampling_methods():
-    from hdrio.response import SAMPLING_METHODS
-    return SAMPLING_METHODS
-
-
-def _weighting_methods():
-    from hdrio.merge.weighting import WEIGHTING_METHODS
-    return WEIGHTING_METHODS
-
-
-def _merge_methods():
-    from hdrio.merge import MERGE_METHODS
-    return MERGE_METHODS
-
-
-merge_domain = _registry(_merge_methods)
-
 # ---------------------------------------------------------------------------- the table
 
 _COLOUR = "colour (see docs/colour.md)"
 _EXPOSURE = "exposures"
 
 MERGE_OPTIONS: tuple[Option, ...] = (
-    Option("--exposures", ("LIST",), "exposures", _exposure_list, example=("1/8,1,8",),
+    Option("--exposures", ("LIST",), "exposures", exposure_list, example=("1/8,1,8",),
            group=_EXPOSURE, help="exposure times in seconds, in image order, comma-separated "
                                  "(1/8,1,8); wins over every other source"),
-    Option("--exposures-from", ("FILE",), "exposures_from", _text, group=_EXPOSURE,
+    Option("--exposures-from", ("FILE",), "exposures_from", text, group=_EXPOSURE,
            example=("exposures.csv",),
            help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "
                 "list.txt"),
-    Option("--response", ("METHOD",), "response", _registry(_response_methods),
+    Option("--response", ("METHOD",), "response", registry(response_methods),
            example=("linear",),
            help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
                 "linear TIFF need no solve; RAW always uses it)"),
-    Option("--response-from", ("EXR",), "response_from", _text, example=("out.exr",),
+    Option("--response-from", ("EXR",), "response_from", text, example=("out.exr",),
            help="reuse the camera response saved in an EXR hdrio wrote (no solve)"),
-    Option("--lambda", ("N",), "smoothing", _positive_number, example=("10",),
+    Option("--lambda", ("N",), "smoothing", positive_number, example=("10",),
            help="smoothness weight lambda of the response solve (default 50)"),
-    Option("--samples", ("N",), "samples", _positive_whole, example=("500",),
+    Option("--samples", ("N",), "samples", positive_whole, example=("500",),
            help="pixels sampled for the solve (default 1000; 'tutorial' sampling computes "
                 "its own)"),
-    Option("--sampling", ("METHOD",), "sampling", _registry(_sampling_methods),
+    Option("--sampling", ("METHOD",), "sampling", registry(sampling_methods),
            example=("tutorial",), help="sample selection for the solve (default stratified)"),
-    Option("--weighting", ("METHOD",), "weighting", _registry(_weighting_methods),
+    Option("--weighting", ("METHOD",), "weighting", registry(weighting_methods),
            example=("tutorial-hat",), help="weighting function (default Debevec1997)"),
     Option("--merge", ("DOMAIN",), "merge", merge_domain, example=("linear",),
            help="merge domain: log (default) or linear; in a chain, --merge's own optional "
                 "argument"),
-    Option("--saturation", ("POLICY",), "saturation", _choice("channel", "pixel"),
+    Option("--saturation", ("POLICY",), "saturation", choice("channel", "pixel"),
            example=("pixel",),
            help="a code at the top of the range drops that channel ('channel', default) or "
                 "the whole pixel ('pixel', the tutorial's) from its bracket and every "
                 "longer one"),
-    Option("--exclude-color", ("R,G,B",), "exclude_colour", _integers(3, "R,G,B codes"),
+    Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
            help="never sample pixels of this code value in any bracket (e.g. 0,0,255 for "
                 "registration borders)"),
-    Option("--seed", ("N",), "seed", _whole, example=("7",), help="sampling seed (default 0)"),
-    Option("--no-skip", ("NAME",), "no_skip", _skip_name, example=("all",), repeat=True,
+    Option("--seed", ("N",), "seed", whole, example=("7",), help="sampling seed (default 0)"),
+    Option("--no-skip", ("NAME",), "no_skip", skip_name, example=("all",), repeat=True,
            help="turn off one of the work skips (repeatable): brackets, covered, response, "
                 "channels, early-stop, or all (see docs/speed.md)"),
-    Option("--colorspace", ("NAME",), "output_space", _text, example=("ACEScg",),
+    Option("--colorspace", ("NAME",), "output_space", text, example=("ACEScg",),
            group=_COLOUR,
            help="OpenColorIO scene-linear space of the EXR, e.g. ACEScg, ACES2065-1 "
                 "(default lin_rec709_scene)"),
-    Option("--colorconfig", ("CONFIG",), "ocio_config", _text, scope="global",
+    Option("--colorconfig", ("CONFIG",), "ocio_config", text, scope="global",
            example=("ocio://cg-config-latest",), aliases=("--ocio-config",), group=_COLOUR,
            help="OpenColorIO config, file or ocio:// URI (default: $OCIO, else "
                 "ocio://cg-config-latest)"),
-    Option("--input-encoding", ("NAME",), "input_encoding", _encoding_name,
+    Option("--input-encoding", ("NAME",), "input_encoding", encoding_name,
            example=("Display P3",), group=_COLOUR,
            help="encoding of the brackets when their ICC profile and EXIF do not say: "
                 "sRGB (default), 'Adobe RGB (1998)', 'Display P3'"),
@@ -306,27 +175,27 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            example=("8,8,16,16",), group=_COLOUR,
            help="X,Y,W,H: make this region neutral grey; R,G,B: camera RAW white-balance "
                 "multipliers (default: the camera's as-shot balance)"),
-    Option("--absolute", ("SOURCE",), "absolute", _choice("exif", "luminance", "illuminance"),
+    Option("--absolute", ("SOURCE",), "absolute", choice("exif", "luminance", "illuminance"),
            example=("exif",), group=_COLOUR,
            help="write cd/m^2: from EXIF (t, N, ISO and --meter-k), or a --reference-region "
                 "of known --reference-luminance, or a grey card of --reference-reflectance "
                 "under --reference-illuminance"),
-    Option("--meter-k", ("K",), "meter_k", _positive_number, example=("14",), group=_COLOUR,
+    Option("--meter-k", ("K",), "meter_k", positive_number, example=("14",), group=_COLOUR,
            needs=("--absolute", "exif"),
            help="reflected-light meter calibration constant (default 12.5)"),
     Option("--reference-region", ("X,Y,W,H",), "reference_region",
-           _integers(4, "a region X,Y,W,H"), example=("8,8,16,16",), group=_COLOUR,
+           integers(4, "a region X,Y,W,H"), example=("8,8,16,16",), group=_COLOUR,
            needs=("--absolute", "luminance", "--reference-luminance", "100"),
            help="region of known luminance or of a grey card, for --absolute"),
-    Option("--reference-luminance", ("CD_M2",), "reference_luminance", _positive_number,
+    Option("--reference-luminance", ("CD_M2",), "reference_luminance", positive_number,
            example=("100",), group=_COLOUR,
            needs=("--absolute", "luminance", "--reference-region", "8,8,16,16"),
            help="luminance of --reference-region"),
-    Option("--reference-illuminance", ("LUX",), "reference_illuminance", _positive_number,
+    Option("--reference-illuminance", ("LUX",), "reference_illuminance", positive_number,
            example=("500",), group=_COLOUR,
            needs=("--absolute", "illuminance", "--reference-region", "8,8,16,16"),
            help="illuminance on the grey card"),
-    Option("--reference-reflectance", ("R",), "reference_reflectance", _positive_number,
+    Option("--reference-reflectance", ("R",), "reference_reflectance", positive_number,
            example=("0.18",), group=_COLOUR,
            needs=("--absolute", "illuminance", "--reference-region", "8,8,16,16",
                   "--reference-illuminance", "500"), help="grey card reflectance (default 0.18)"),
