@@ -185,3 +185,25 @@ def test_no_library_warning_without_matplotlib(brackets, tmp_path):
     completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert completed.returncode == 0, completed.stderr
     assert "Warning" not in completed.stderr, completed.stderr
+
+
+def test_a_flag_and_a_repeatable_option_in_the_table_work_in_argparse():
+    """How a new entry behaves (the lead ports options in as entries): a flag gives True,
+    a repeatable option a tuple, a bad value one line naming the option."""
+    import argparse
+
+    from hdrio.cli.options import Option, add_arguments, settings_from_namespace
+    from hdrio.cli.values import flag, positive_whole
+    from hdrio.errors import HdrioError
+
+    table = (Option("--deghost", (), "deghost", flag, help="h", example=()),
+             Option("--level", ("N",), "levels", positive_whole, help="h", example=("2",),
+                    repeat=True))
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, options=table)
+    settings = settings_from_namespace(
+        parser.parse_args(["--deghost", "--level", "2", "--level", "3"]), table)
+    assert settings == {"deghost": True, "levels": (2, 3)}
+    assert settings_from_namespace(parser.parse_args([]), table) == {}
+    with pytest.raises(HdrioError, match="--level 0: expected a positive whole number"):
+        settings_from_namespace(parser.parse_args(["--level", "0"]), table)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -210,28 +210,35 @@ _CALIBRATION_KEYS = ("absolute", "meter_k", "reference_region", "reference_lumin
 # --------------------------------------------------------------------------- front ends
 
 
-def add_arguments(parser: argparse.ArgumentParser, skip: Iterable[str] = ()) -> None:
-    """Put every option of :data:`MERGE_OPTIONS` (but those named in ``skip``) on
-    ``parser``; read them back with :func:`settings_from_namespace`."""
+def add_arguments(parser: argparse.ArgumentParser, skip: Iterable[str] = (),
+                  options: Sequence[Option] = MERGE_OPTIONS) -> None:
+    """Put every option of ``options`` (but those named in ``skip``) on ``parser``; read
+    them back with :func:`settings_from_namespace`."""
     groups: dict[str, Any] = {}
-    for option in MERGE_OPTIONS:
+    for option in options:
         if option.name in skip:
             continue
         group = groups.get(option.group) or parser.add_argument_group(option.group)
         groups[option.group] = group
-        metavar = option.arguments[0] if len(option.arguments) == 1 else option.arguments
+        if not option.arguments:  # a flag: convert([]) gives its value
+            kind: dict[str, Any] = {"action": "append_const" if option.repeat
+                                    else "store_const", "const": []}
+        else:
+            kind = {"action": "append" if option.repeat else "store",
+                    "nargs": len(option.arguments) if len(option.arguments) > 1 else None,
+                    "metavar": option.arguments[0] if len(option.arguments) == 1
+                    else option.arguments}
         group.add_argument(*option.spellings, dest=f"option:{option.key}",
-                           nargs=len(option.arguments) if len(option.arguments) > 1 else None,
-                           metavar=metavar, default=argparse.SUPPRESS,
-                           action="append" if option.repeat else "store",
+                           default=argparse.SUPPRESS, **kind,
                            help=f"{option.help} (e.g. {option.name} "
                                 f"{shlex.join(option.example)})".replace("%", "%%"))
 
 
-def settings_from_namespace(args: argparse.Namespace) -> dict[str, Any]:
+def settings_from_namespace(args: argparse.Namespace,
+                            options: Sequence[Option] = MERGE_OPTIONS) -> dict[str, Any]:
     """The values :func:`add_arguments` parsed, converted, by key (only those given)."""
     settings: dict[str, Any] = {}
-    for option in MERGE_OPTIONS:
+    for option in options:
         raw = getattr(args, f"option:{option.key}", None)
         if raw is None:
             continue

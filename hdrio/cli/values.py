@@ -11,6 +11,11 @@ from collections.abc import Callable
 from typing import Any
 
 
+def flag(values: list[str]) -> bool:
+    """A flag (an option without arguments): ``True`` when given."""
+    return True
+
+
 def text(values: list[str]) -> str:
     return values[0]
 
