@@ -207,3 +207,13 @@ def test_a_flag_and_a_repeatable_option_in_the_table_work_in_argparse():
     assert settings_from_namespace(parser.parse_args([]), table) == {}
     with pytest.raises(HdrioError, match="--level 0: expected a positive whole number"):
         settings_from_namespace(parser.parse_args(["--level", "0"]), table)
+
+
+def test_chain_refuses_to_overwrite_an_exr_input_before_work(brackets, tmp_path, capsys):
+    exr = tmp_path / "in.exr"
+    assert run(capsys, *brackets, "--merge", "-o", exr)[0] == 0
+    before = exr.read_bytes()
+    code, _, err = run(capsys, exr, "--exposure", "1", "-o", tmp_path / "x.exr",
+                       "-o", exr)
+    assert code == 2 and "would overwrite an input" in err, err
+    assert exr.read_bytes() == before and not (tmp_path / "x.exr").exists()

@@ -58,8 +58,9 @@ def _input_files(chain: Chain, path: Path) -> list[Path]:
 
 
 def _check_input(chain: Chain, path: Path) -> None:
+    files = _input_files(chain, path)
+    chain.inputs.extend(files)
     if path.suffix.lower() in FLOAT_SUFFIXES and not path.is_dir():
-        _input_files(chain, path)
         from hdrio.io.header import read_header
 
         header = read_header(path) if path.exists() else {}
@@ -67,7 +68,7 @@ def _check_input(chain: Chain, path: Path) -> None:
         chain.images.append(Image(np.zeros((1, 1, 3), np.float32), dict(header), str(path),
                                   display=display))
         return
-    chain.brackets.extend(_input_files(chain, path))
+    chain.brackets.extend(files)
 
 
 @operation("read", "FILE", help="an input file or folder", example="a.jpg", hidden=True,

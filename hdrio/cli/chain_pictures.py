@@ -3,12 +3,22 @@
 from __future__ import annotations
 
 from hdrio.cli.chain_output import output_path
+from hdrio.cli.outputs import make_parent
 from hdrio.cli.registry import Chain, ChainError, operation
 
 
-def _check_merge_before(chain: Chain, _name: str) -> None:
+def _check_merge_before(chain: Chain, name: str) -> None:
     if chain.last_merge is None:
         raise ChainError("no merge to draw: put this after --merge")
+    _check_name(chain, name)
+
+
+def _check_name(chain: Chain, name: str) -> None:
+    from pathlib import Path
+
+    from hdrio.cli.outputs import check_output
+
+    check_output(Path(name), {".png"}, [str(p) for p in chain.inputs])
 
 
 def _latest_merge(chain: Chain):
@@ -21,6 +31,11 @@ def _picture_name(values: list[str]) -> str:
     if not values[0].lower().endswith(".png"):
         raise ValueError("pictures are PNG files: name it *.png")
     return values[0]
+
+
+def _target(chain: Chain, name: str):
+    """The picture's path (pattern fields filled in), its folder made."""
+    return make_parent(output_path(chain, name))
 
 
 def _written(chain: Chain, path) -> None:
@@ -36,7 +51,7 @@ def _written(chain: Chain, path) -> None:
 def _plot_response(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_response
 
-    _written(chain, plot_response(_latest_merge(chain), output_path(chain, name)))
+    _written(chain, plot_response(_latest_merge(chain), _target(chain, name)))
 
 
 @operation("--plot-contribution", "PNG", convert=_picture_name, check=_check_merge_before,
@@ -45,11 +60,11 @@ def _plot_response(chain: Chain, name: str) -> None:
 def _plot_contribution(chain: Chain, name: str) -> None:
     from hdrio.plots import plot_contribution
 
-    _written(chain, plot_contribution(_latest_merge(chain), output_path(chain, name)))
+    _written(chain, plot_contribution(_latest_merge(chain), _target(chain, name)))
 
 
 @operation("--plot-stops", "PNG", convert=_picture_name,
-           check=lambda chain, _name: chain.top(),
+           check=lambda chain, name: (chain.top(), _check_name(chain, name)),
            help="false-colour map of the top image's luminance in stops from its median, "
                 "with a legend", example="a.jpg b.jpg c.jpg --merge --plot-stops stops.png")
 def _plot_stops(chain: Chain, name: str) -> None:
@@ -58,7 +73,7 @@ def _plot_stops(chain: Chain, name: str) -> None:
     image = chain.top()
     if image.display:
         raise ChainError("the image is tone-mapped; draw stops before --tonemap")
-    _written(chain, plot_stops(image.pixels, output_path(chain, name)))
+    _written(chain, plot_stops(image.pixels, _target(chain, name)))
 
 
 @operation("--contact-sheet", "PNG", convert=_picture_name, check=_check_merge_before,
@@ -67,4 +82,4 @@ def _plot_stops(chain: Chain, name: str) -> None:
 def _contact_sheet(chain: Chain, name: str) -> None:
     from hdrio.plots import contact_sheet
 
-    _written(chain, contact_sheet(_latest_merge(chain).stack, output_path(chain, name)))
+    _written(chain, contact_sheet(_latest_merge(chain).stack, _target(chain, name)))
