@@ -38,7 +38,7 @@ def add_merge(sub) -> None:
     preview = parser.add_argument_group("preview")
     preview.add_argument("--preview", help="also write a tone-mapped preview (jpg, png, tif)")
     preview.add_argument("--tonemap", nargs="+", default=["reinhard-global"],
-                         metavar="OPERATOR [NAME=VALUE,...]",
+                         metavar=("OPERATOR", "NAME=VALUE,"),
                          help=f"preview operator ({', '.join(TONEMAP_METHODS.names())}; "
                               "default reinhard-global) and its parameters, e.g. "
                               "--tonemap reinhard-global key=0.18,white=8")
