@@ -105,12 +105,14 @@ def replace_non_finite(pixels: np.ndarray, source: str = "image"
     return out, note
 
 
-def read_image(path: str | Path, say=None) -> tuple[np.ndarray, dict[str, object]]:
+def read_image(path: str | Path, say=None, alpha: bool = False):
     """Read a float image (OpenEXR, Radiance HDR, ...) as float32 ``(H, W, C)`` RGB.
 
-    Returns the pixels (alpha and extra channels dropped) and the header attributes.
-    NaN and infinite values are replaced (:func:`replace_non_finite`); ``say(note)``,
-    when given, is called with the one-line note saying so.
+    Returns the pixels (alpha and extra channels dropped) and the header attributes; with
+    ``alpha=True``, the pixels and the ``(H, W, 1)`` alpha channel (``None`` if none)
+    instead of the attributes. NaN and infinite values are replaced
+    (:func:`replace_non_finite`); ``say(note)``, when given, is called with the one-line
+    note saying so.
     """
     import OpenImageIO as oiio
 
@@ -125,10 +127,18 @@ def read_image(path: str | Path, say=None) -> tuple[np.ndarray, dict[str, object
         pixels = image.read_image(0, 0, 0, channels, oiio.FLOAT)
         if pixels is None or image.has_error:
             raise InputError(path, f"cannot decode image ({library_message(image.geterror)})")
+        names = list(spec.channelnames)
+        opacity = None
+        if alpha and "A" in names:
+            index = names.index("A")
+            opacity = image.read_image(0, 0, index, index + 1, oiio.FLOAT)
+            opacity = np.asarray(opacity, dtype=np.float32).reshape(spec.height, spec.width, 1)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, channels)
     pixels, note = replace_non_finite(pixels, str(path))
     if note and say is not None:
         say(note)
+    if alpha:
+        return pixels, opacity
     return pixels, {k: v for k, v in header.items() if not k.startswith(".")}

@@ -24,6 +24,7 @@ from hdrio.io.brackets import read_brackets
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
+from hdrio.jit import announce
 from hdrio.merge.debevec1997 import MergeStatistics
 from hdrio.merge.estimators import (
     MERGE_METHODS,
@@ -73,6 +74,8 @@ class MergeOptions:
     ocio_config: str | None = None  # path or ocio:// URI; None: $OCIO, else built-in
     calibration: Calibration | None = None  # None: relative radiance
     white_balance: Region | None = None  # neutral region x, y, w, h; None: camera's
+    # Camera RAW white-balance multipliers R, G, B for the set; None: as shot.
+    raw_multipliers: tuple[float, float, float] | None = None
     # A saved response (an EXR written by hdrio) instead of a solve: hdrio.skips.
     response_from: str | None = None
     # Names in hdrio.skips.SKIPS turned off (all on by default).
@@ -158,6 +161,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
         method = "linear" if is_raw_stack(stack) else options.response
+        if method != "linear":
+            announce(say, "response")
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
         try:
@@ -194,6 +199,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     noise = (fit_noise(stack.codes, stack.exposures, response,
                        code_floor=code_variance_floor(stack.files))
              if method in NOISE_AWARE or options.uncertainty else None)
+    announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](
         merged, response, options.weighting, options.saturation,
@@ -239,8 +245,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:units": "relative",
         "hdrio:exposureScale": float(result.exposure_scale),
         "hdrio:sourceFiles": [str(name) for name in stack.files],
-        # Exact decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
-        "hdrio:exposures": [repr(float(t)) for t in stack.exposures],
+        # Decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
+        "hdrio:exposures": [exposure_text(t) for t in stack.exposures],
         "hdrio:exposureSource": stack.exposure_sources[0],
         "hdrio:codeMax": int(stack.code_max),
         "hdrio:responseMethod": response.method,
@@ -256,6 +262,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    attributes.update(capture_attributes(stack))
     if result.noise is not None:
         attributes.update(result.noise.attributes())
     if result.uncertainty is not None:
@@ -284,6 +291,28 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     return attributes
 
 
+def exposure_text(seconds: float) -> str:
+    """The shortest decimal that reads back as ``seconds``: ``0.01``, not
+    ``0.009999999776482582``, for a time that EXIF stored as a 32-bit float."""
+    seconds = float(seconds)
+    single = np.float32(seconds)
+    if float(single) == seconds:  # a 32-bit value: its own shortest form
+        return np.format_float_positional(single, unique=True, trim="-")
+    return repr(seconds)
+
+
+def capture_attributes(stack: ExposureStack) -> dict[str, object]:
+    """Capture time and camera of the first bracket, from its EXIF, as OpenImageIO names
+    them (``DateTime`` is EXR's ``capDate``). An unknown time is written as none (an
+    empty ``DateTime``), not as the time of writing."""
+    first = stack.metadata[0] if stack.metadata else {}
+    attributes: dict[str, object] = {"DateTime": str(first.get("DateTimeOriginal") or "")}
+    for name in ("Make", "Model"):
+        if first.get(name):
+            attributes[name] = str(first[name])
+    return attributes
+
+
 def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
                    space: str = DEFAULT_SPACE, **parameters: float) -> np.ndarray:
     """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1].
@@ -307,25 +336,19 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     return encode_sRGB(display)
 
 
-def merge_files(paths: Sequence[str | Path], output: str | Path, *,
-                preview: str | Path | None = None, tonemap: str = "reinhard-global",
+def merge_paths(paths: Sequence[str | Path], *,
                 exposures: Sequence[float | str] | None = None,
                 exposures_from: str | Path | None = None,
-                options: MergeOptions = MergeOptions(), pixel_type: str = "half",
-                progress: Progress | None = None,
-                read_progress: Callable[[int, int, str], None] | None = None,
-                display_view: tuple[str, str] | None = None) -> MergeResult:
-    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+                options: MergeOptions = MergeOptions(), progress: Progress | None = None,
+                read_progress: Callable[[int, int, str], None] | None = None) -> MergeResult:
+    """Read brackets and merge them (no output written): what every front end calls.
 
-    ``display_view``: render the preview through that OCIO display and view instead of
-    the ``tonemap`` operator.
+    ``result.radiance`` is in the input encoding's linear primaries; see
+    :func:`output_pixels` for the EXR's space.
     """
     say = progress or (lambda message: None)
-    # Fail before reading: every input a readable file, given once; outputs named well,
-    # in folders that take a new file.
+    # Fail before reading: every input a readable file, given once.
     check_inputs(paths)
-    check_outputs([(output, {".exr"}), *([(preview, None)] if preview is not None else [])],
-                  paths)
     require_scene_linear(options.output_space, options.ocio_config)
     response = None
     if options.response_from is not None and "response" in options.skips:
@@ -333,7 +356,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     start = time.perf_counter()
     say(f"reading {len(paths)} brackets")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
-                          progress=read_progress, skip_brackets="brackets" in options.skips,
+                          progress=read_progress, white_balance=options.raw_multipliers,
+                          skip_brackets="brackets" in options.skips,
                           stop_when_covered=response is not None
                           and "covered" in options.skips)
     read_time = time.perf_counter() - start
@@ -341,17 +365,70 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     if response is not None:
         result.skipped.response_from = str(options.response_from)
     result.timings["read"] = read_time
+    return result
+
+
+def output_pixels(result: MergeResult) -> np.ndarray:
+    """The merge's radiance in the EXR's working space (``options.output_space``)."""
+    if result.colour is None:
+        return result.radiance
+    return output_radiance(result.radiance, result.colour, result.options.output_space,
+                           result.options.ocio_config)
+
+
+def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, object], *,
+                   pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
+                   alpha: np.ndarray | None = None,
+                   observe: Callable[[np.ndarray], None] | None = None,
+                   layers: dict[str, np.ndarray] | None = None) -> float:
+    """Write scene-linear ``pixels`` as EXR, scaled into half's range when needed.
+
+    ``scale`` is the factor already applied to the merged radiance (``--exposure``);
+    ``hdrio:exposureScale`` (and ``whiteLuminance`` for absolute units) record it times
+    the half-range factor, which is returned. ``alpha`` ``(H, W, 1)``, when given, is
+    written unscaled as channel A. ``observe`` sees each band as stored. ``layers``: extra
+    unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``.
+    """
+    extra = half_safe_scale(pixels) if pixel_type == "half" else 1.0
+    attributes = dict(attributes)
+    attributes["hdrio:exposureScale"] = float(scale * extra)
+    if "whiteLuminance" in attributes:  # OpenEXR: cd/m^2 of RGB (1, 1, 1) as stored
+        attributes["whiteLuminance"] = 1.0 / float(scale * extra)
+    if alpha is not None:  # the band scaling below must leave alpha as it is
+        pixels = np.concatenate([pixels, alpha / np.float32(extra)], axis=-1)
+    write_exr(path, pixels, attributes, pixel_type=pixel_type, compression=compression,
+              scale=extra, observe=observe, layers=layers)
+    return extra
+
+
+def merge_files(paths: Sequence[str | Path], output: str | Path, *,
+                preview: str | Path | None = None, tonemap: str = "reinhard-global",
+                exposures: Sequence[float | str] | None = None,
+                exposures_from: str | Path | None = None,
+                options: MergeOptions = MergeOptions(), pixel_type: str = "half",
+                progress: Progress | None = None,
+                read_progress: Callable[[int, int, str], None] | None = None,
+                display_view: tuple[str, str] | None = None,
+                observe: Callable[[np.ndarray], None] | None = None,
+                tonemap_parameters: dict[str, float] | None = None) -> MergeResult:
+    """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
+
+    ``display_view``: render the preview through that OCIO display and view instead of
+    the ``tonemap`` operator (with ``tonemap_parameters``). ``observe`` sees each band of
+    the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`).
+    """
+    say = progress or (lambda message: None)
+    # Fail before reading: outputs named well, in folders that take a new file.
+    check_outputs([(output, {".exr"}), *([(preview, None)] if preview is not None else [])],
+                  paths)
+    result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
+                         options=options, progress=progress, read_progress=read_progress)
     start = time.perf_counter()
-    radiance = result.radiance
-    if result.colour is not None:
-        radiance = output_radiance(radiance, result.colour, options.output_space,
-                                   options.ocio_config)
-    if pixel_type == "half":
-        result.exposure_scale = half_safe_scale(radiance)
     say(f"writing {output}")
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
-    write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type,
-              scale=result.exposure_scale, layers=layers)
+    result.exposure_scale = write_radiance(output, output_pixels(result),
+                                           exr_attributes(result), pixel_type=pixel_type,
+                                           observe=observe, layers=layers)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()
@@ -359,10 +436,13 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
             say(f"rendering preview ({' / '.join(display_view)})")
             pixels = preview_OCIO_display(
                 result.radiance, result.colour.encoding.linear_interop_id, *display_view,
-                colourspace=options.colourspace, config=options.ocio_config)
+                colourspace=result.options.colourspace, config=options.ocio_config)
         else:
+            if not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"):
+                announce(say, "preview")
             say(f"tone mapping preview ({tonemap})")
-            pixels = render_preview(result.radiance, tonemap, options.colourspace)
+            pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
+                                    **(tonemap_parameters or {}))
         write_preview(preview, pixels)
         result.timings["preview"] = time.perf_counter() - start
     return result

@@ -132,13 +132,14 @@ def test_wrong_number_of_exposures(brackets, out_dir, capsys):
 
 
 def test_unparsable_exposure(brackets, out_dir, capsys):
+    # Found while the options are parsed, before any image is read: the option is named.
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "1/8,fast,1"),
-                    out_dir, str(brackets[1]), "'fast'")
+                    out_dir, "--exposures 1/8,fast,1", "'fast'")
 
 
 def test_exposure_too_large_for_a_float(brackets, out_dir, capsys):
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "1/8,1e400,1"),
-                    out_dir, str(brackets[1]))
+                    out_dir, "--exposures 1/8,1e400,1")
 
 
 def test_unreadable_file(brackets, tmp_path, out_dir, capsys):
@@ -189,17 +190,20 @@ def test_malformed_sidecar(brackets, tmp_path, out_dir, capsys):
                     out_dir, str(sidecar), "line 2")
 
 
-def test_output_in_a_nonexistent_folder(brackets, tmp_path, out_dir, capsys):
-    output = tmp_path / "nope" / "out.exr"
+def test_outputs_in_missing_folders_make_them(brackets, tmp_path, capsys):
+    output, preview = tmp_path / "new" / "deeper" / "out.exr", tmp_path / "p" / "out.jpg"
+    code, _, err = run(capsys, "merge", *brackets, "-o", output, "--preview", preview, "-q")
+    assert code == 0, err
+    assert output.is_file() and preview.is_file()
+
+
+def test_output_under_a_file_is_refused_before_work(brackets, tmp_path, out_dir, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    output = blocker / "sub" / "out.exr"
     assert_rejected(capsys, ["merge", *brackets, "-o", output, "-q"], out_dir,
-                    str(output), "does not exist")
-    assert not output.parent.exists()
-
-
-def test_preview_in_a_nonexistent_folder(brackets, tmp_path, out_dir, capsys):
-    preview = tmp_path / "nope" / "out.jpg"
-    assert_rejected(capsys, ["merge", *brackets, "-o", out_dir / "out.exr",
-                             "--preview", preview, "-q"], out_dir, str(preview), "does not exist")
+                    str(output), "is a file, not a folder")
+    assert blocker.read_text() == "x"
 
 
 @pytest.mark.parametrize("output", ["out.png", "out.hdr", "out"])

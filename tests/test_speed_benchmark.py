@@ -38,3 +38,17 @@ def test_skips_section_times_every_skip_on_and_off(tmp_path):
     rows = json.loads((tmp_path / "speed.json").read_text())["rows"]
     timed = {(row["skip"], row["state"]) for row in rows if row["row"] == "skips"}
     assert timed == {(name, state) for name in SKIPS for state in ("on", "off")}
+
+
+def test_process_section_times_the_commands_users_type(tmp_path):
+    assert main(["--width", "96", "--height", "64", "--repeats", "1", "--only", "process",
+                 "--out", str(tmp_path)]) == 0
+    results = json.loads((tmp_path / "speed.json").read_text())
+    rows = [row for row in results["rows"] if row["row"] == "process"]
+    assert {row.get("merge_of") for row in rows} >= {5, 7, 9}
+    assert {row.get("floor_of") for row in rows} >= {5, 7, 9}
+    assert any(row.get("check") for row in rows)
+    assert {row.get("demo") for row in rows} >= {"cold", "warm"}
+    # Peak memory from the OS for each process: a real Python process holds > 10 MB.
+    assert all(row["process_peak_mb"] > 10 for row in rows)
+    assert results["ratios"]["process: hdrio merge 7 JPEGs / I/O floor process"] > 0

@@ -12,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks.speed import endtoend, jit, merge, response, skips
+from benchmarks.speed import endtoend, jit, merge, process, response, skips
 from benchmarks.speed.scene import bracket_stack
 from benchmarks.truth.harness import environment
 from benchmarks.truth.scenes import REPO_ROOT
 
-SECTIONS = ("jit", "merge", "response", "endtoend", "skips")
+SECTIONS = ("process", "jit", "merge", "response", "endtoend", "skips")
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
@@ -61,6 +61,7 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
             (row["method"] for row in rows if row.get("end_to_end") == "hdrio"), ""),
             "I/O floor, two JPEGs decoded at once as hdrio does"),
         **skips.saved_ratios(rows),
+        **process.ratios(rows),
     }
 
 
@@ -85,6 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows: list[dict] = []
     load_before = os.getloadavg()[0]
+    if "process" in sections:  # first: the commands as users type them
+        rows += process.run(args.height, args.width, args.repeats)
     if "jit" in sections:
         rows += jit.run()
     if {"merge", "response", "endtoend"} & set(sections):

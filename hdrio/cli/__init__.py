@@ -12,11 +12,16 @@ import argparse
 import contextlib
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 from hdrio import __version__
 from hdrio.cli import colour, commands
 from hdrio.errors import HdrioError
+
+# colour-science warns at import when Matplotlib is absent; only its plotting needs it
+# (hdrio's --plot-* say so themselves), so it is not the user's business on every run.
+warnings.filterwarnings("ignore", message='"Matplotlib" related API features')
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 130, 141

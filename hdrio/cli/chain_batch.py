@@ -13,15 +13,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from hdrio.cli.chain import (
-    FLOAT_SUFFIXES,
-    Chain,
-    ChainError,
-    Step,
-    operation,
-    run_steps,
-)
 from hdrio.cli.progress import Progress
+from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.errors import HdrioError
 
 # Steps that say how to run, not what to make: not part of a set's fingerprint.
@@ -157,9 +150,13 @@ def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
 # ------------------------------------------------------------------------------- run
 
 
-def _run_set(steps: list[Step], settings: dict[str, Any], verbose: bool,
-             task) -> tuple[bool, str]:
-    """Run ``steps`` on one set (in a worker); ``(ok, what it printed)``."""
+def run_set(steps: list[Step], settings: dict[str, Any], verbose: bool,
+            task) -> tuple[bool, str]:
+    """Run ``steps`` on one set (in a worker); ``(ok, what it printed)``.
+
+    Submitted through ``chain.run_set`` (:func:`hdrio.cli.chain.run_set`, which imports
+    every operation first: a spawned or Dask worker starts with none registered).
+    """
     out = io.StringIO()
     files = list(task.files)
     chain = Chain(out=out, progress=Progress(quiet=not verbose), brackets=list(files),
@@ -189,7 +186,22 @@ def _client(address: str):
         raise ChainError(f"--dask {address}: cannot reach the scheduler ({error})") from None
 
 
-def run_groups(chain: Chain, step: Step, rest: list[Step], steps: list[Step]) -> None:
+def _check_group(chain: Chain, _values: list[str]) -> None:
+    if not chain.brackets:
+        raise ChainError("no brackets to group: give a folder or files before --group")
+    if "exposures" in chain.settings:
+        raise ChainError("--exposures cannot serve several sets; use EXIF (the default) "
+                         "or --exposures-from")
+
+
+@operation("--group", rest=True, check=_check_group,
+           help="split the pending brackets into bracket sets (repeated exposures, time "
+                "gaps, file-name ladders, --group-size) and run the rest of the chain on "
+                "each set, in parallel; a set is done when its outputs were made from the "
+                "same inputs and settings (--force redoes it)",
+           example="shoot/ --group --merge -o {first_stem}_hdr.exr")
+def run_groups(chain: Chain, _values: list[str], rest: list[Step],
+               steps: list[Step]) -> None:
     """Split the pending brackets into sets and run ``rest`` on each, in parallel."""
     from hdrio.batch import DONE, RUN, run_sets, sets_json
 
@@ -220,7 +232,7 @@ def run_groups(chain: Chain, step: Step, rest: list[Step], steps: list[Step]) ->
         for line in result.printed.strip().splitlines():
             chain.say(f"    {line}")
 
-    work = partial(_run_set, rest, chain.settings, not chain.progress.quiet)
+    work = partial(chain.run_set or run_set, rest, chain.settings, not chain.progress.quiet)
     client = cluster = None
     if chain.settings.get("dask"):
         client, cluster = _client(chain.settings["dask"])
@@ -241,7 +253,7 @@ def run_groups(chain: Chain, step: Step, rest: list[Step], steps: list[Step]) ->
 def print_plan(chain: Chain, steps: list[Step]) -> None:
     """``--dry-run``: the steps, the sets ``--group`` would find, and what would be done."""
     from hdrio.batch import DONE, RUN, sets_json
-    from hdrio.cli.chain_ops import read_input
+    from hdrio.cli.registry import OPERATIONS
 
     if not chain.settings.get("list_sets"):
         chain.say("plan (dry run, nothing is written):")
@@ -252,7 +264,7 @@ def print_plan(chain: Chain, steps: list[Step]) -> None:
             if not chain.settings.get("list_sets"):
                 chain.say(f"  {number}. read {step.value} ({kind})")
             if kind != "image":
-                read_input(chain, step.value)
+                OPERATIONS["read"].run(chain, step.value)
             continue
         if step.name == "--group":
             tasks = _plan(chain, steps, steps[number:])

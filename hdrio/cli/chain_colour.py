@@ -1,15 +1,18 @@
 """The chain's colour operations: ``--colorconvert``, ``--colorspace``, ``--ociodisplay``.
 
-OpenColorIO does the work (:mod:`hdrio.cms.spaces`); the config is ``--ocio-config``'s,
-else ``$OCIO``, else OCIO's built-in CG config. The image's space is the one its header
-records (``hdrio:colorSpace``; linear Rec.709 when it says nothing), and every conversion
-rewrites ``chromaticities``, ``colorInteropID``, ``hdrio:colorSpace`` and
-``hdrio:ocioConfig`` to match.
+OpenColorIO does the work (:mod:`hdrio.cms.spaces`); the config is ``--colorconfig``'s
+(a merge option: :mod:`hdrio.cli.options`), else ``$OCIO``, else OCIO's built-in CG
+config. The image's space is the one its header records (``hdrio:colorSpace``; linear
+Rec.709 when it says nothing), and every conversion rewrites the attributes that say
+what the pixels are (:func:`hdrio.cms.stage.space_attributes`) to match.
 """
 
 from __future__ import annotations
 
-from hdrio.cli.chain import Chain, ChainError, Image, one_argument, operation
+from hdrio.cli.chain_merge import note_pending
+from hdrio.cli.chain_ops import needs_scene_linear
+from hdrio.cli.options import OPTIONS_BY_NAME, set_value
+from hdrio.cli.registry import Chain, ChainError, Image, operation
 
 
 def _config(chain: Chain) -> str | None:
@@ -19,66 +22,88 @@ def _config(chain: Chain) -> str | None:
 def _space_of(image: Image) -> str:
     from hdrio.cms.spaces import DEFAULT_WORKING_SPACE
 
-    return str(image.attributes.get("hdrio:colorSpace", DEFAULT_WORKING_SPACE))
+    return str(image.attribute("hdrio:colorSpace", DEFAULT_WORKING_SPACE))
 
 
 def _convert(chain: Chain, image: Image, source: str, target: str) -> None:
     from hdrio.cms import spaces
+    from hdrio.cms.stage import space_attributes
 
     if image.display:
         raise ChainError("the image is display-referred (after --tonemap or --ociodisplay); "
                          "convert colour before")
     config = _config(chain)
     image.pixels = spaces.convert(image.pixels, source, target, config)
-    image.attributes["hdrio:colorSpace"] = spaces.canonical_space(target, config)
-    image.attributes["hdrio:ocioConfig"] = spaces.config_label(config)
-    image.attributes["chromaticities"] = spaces.chromaticities(target, config)
-    interop = spaces.interop_id(target, config)
-    if interop:
-        image.attributes["colorInteropID"] = interop
-    else:
-        image.attributes.pop("colorInteropID", None)
+    image.statistics = None
+    image.attributes.pop("colorInteropID", None)
+    image.attributes.update(space_attributes(target, config))
 
 
-@operation("--ocio-config", "CONFIG", convert=one_argument, per_set=False,
-           help="OpenColorIO config (file or ocio:// URI) for the colour operations "
-                "(default: $OCIO, else ocio://cg-config-latest)",
-           example="--ocio-config ocio://studio-config-latest")
-def _ocio_config(chain: Chain, config: str) -> None:
-    from hdrio.cms.spaces import load_config
+def _check_colorconvert(chain: Chain, value: tuple[str, str]) -> None:
+    from hdrio.cms.spaces import canonical_space
 
-    load_config(config)  # fails here, naming the config, if it cannot be loaded
-    chain.settings["ocio_config"] = config
+    image = needs_scene_linear(chain)
+    for name in value:
+        canonical_space(name, _config(chain))
+    image.attributes["hdrio:colorSpace"] = value[1]
 
 
 @operation("--colorconvert", "FROM", "TO", convert=lambda values: (values[0], values[1]),
+           check=_check_colorconvert,
            help="convert the image's pixels from colour space FROM to TO (OpenColorIO names "
                 "or aliases) and record TO in the header",
-           example="in.exr --colorconvert lin_rec709_scene ACEScg -o acescg.exr")
+           example="out.exr --colorconvert lin_rec709_scene ACEScg -o acescg.exr")
 def _colorconvert(chain: Chain, value: tuple[str, str]) -> None:
     source, target = value
     _convert(chain, chain.top(), source, target)
 
 
-@operation("--colorspace", "NAME", convert=one_argument,
-           help="convert the scene-linear image from the space its header records to NAME "
-                "(a scene-linear OpenColorIO space: ACEScg, ACES2065-1, lin_p3d65_scene, ...)",
-           example="a.jpg b.jpg c.jpg --merge --colorspace ACEScg -o out.exr")
+_COLORSPACE = OPTIONS_BY_NAME["--colorspace"]
+
+
+def _check_colorspace(chain: Chain, name: str) -> None:
+    from hdrio.cms.spaces import require_scene_linear
+
+    canonical = require_scene_linear(name, _config(chain))
+    if chain.brackets:
+        set_value(chain.settings, _COLORSPACE, name)
+        note_pending(chain, "--colorspace")
+    else:
+        needs_scene_linear(chain).attributes["hdrio:colorSpace"] = canonical
+
+
+@operation("--colorspace", "NAME", convert=_COLORSPACE.parse, check=_check_colorspace,
+           help="the scene-linear OpenColorIO space (ACEScg, ACES2065-1, lin_p3d65_scene, "
+                "...): before --merge, the merge's working space (as 'hdrio merge "
+                "--colorspace'); after, converts the image from the space its header records",
+           example="a.jpg b.jpg c.jpg --colorspace ACEScg --merge -o out.exr")
 def _colorspace(chain: Chain, name: str) -> None:
     from hdrio.cms.spaces import require_scene_linear
 
-    image = chain.top()
     require_scene_linear(name, _config(chain))
+    if chain.brackets:  # waiting for --merge: its working space
+        set_value(chain.settings, _COLORSPACE, name)
+        return
+    image = chain.top()
     _convert(chain, image, _space_of(image), name)
 
 
+def _check_ociodisplay(chain: Chain, value: tuple[str, str]) -> None:
+    from hdrio.cms.spaces import display_view_names
+
+    display_view_names(*value, _config(chain))
+    needs_scene_linear(chain).display = True
+
+
 @operation("--ociodisplay", "DISPLAY", "VIEW", convert=lambda values: (values[0], values[1]),
+           check=_check_ociodisplay,
            help="render the scene-linear image through an OpenColorIO display and view "
                 "(mid grey at the scene's log-average), giving a display image",
            example="out.exr --ociodisplay 'sRGB - Display' "
                    "'ACES 2.0 - SDR 100 nits (Rec.709)' -o preview.jpg")
 def _ociodisplay(chain: Chain, value: tuple[str, str]) -> None:
     from hdrio.cms import spaces
+    from hdrio.cms.stage import display_attributes
     from hdrio.tonemap.display import preview_OCIO_display
 
     display, view = value
@@ -92,4 +117,6 @@ def _ociodisplay(chain: Chain, value: tuple[str, str]) -> None:
         raise ChainError(f"{space}: no colour-science primaries known for its luminance")
     image.pixels = preview_OCIO_display(image.pixels, space, display, view,
                                         colourspace=colourspace, config=config)
-    image.display = True
+    image.attributes = display_attributes(image.attributes, f"{display} / {view}",
+                                          display, config)
+    image.display, image.statistics = True, None

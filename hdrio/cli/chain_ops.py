@@ -1,12 +1,13 @@
-"""The chain's operations, one registered function each (see :func:`chain.operation`).
+"""The chain's inputs and image steps, one registered function each (see
+:func:`hdrio.cli.registry.operation`).
 
-To add one (a colour operation, say), write::
+To add one, write (and add ``check`` when it can fail on its arguments)::
 
-    @operation("--colorspace", "NAME", help="...", example="--colorspace ACEScg",
-               convert=lambda values: values[0])
-    def _colorspace(chain: Chain, name: str) -> None:
+    @operation("--invert", help="...", example="out.exr --invert -o inverted.exr",
+               check=needs_scene_linear)
+    def _invert(chain: Chain, _values) -> None:
         image = chain.top()
-        image.pixels = some_core_function(image.pixels, name)
+        image.pixels = some_core_function(image.pixels)
 """
 
 from __future__ import annotations
@@ -14,16 +15,84 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from hdrio.cli.chain import (
-    FLOAT_SUFFIXES,
-    Chain,
-    ChainError,
-    Image,
-    one_argument,
-    operation,
-)
+import numpy as np
 
-_one = one_argument
+from hdrio.cli.options import tonemap_arguments
+from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Image, operation
+from hdrio.errors import HdrioError
+
+# ----------------------------------------------------------------------------- inputs
+
+# Attributes that describe the file's layout or the writer, not the pixels: the writer
+# sets them anew. Everything else (Copyright, GPS, capDate, ExposureTime, owner,
+# screenWindow..., hdrio's provenance) is carried to the outputs, as oiiotool does.
+_LAYOUT_PREFIXES = ("oiio:", "openexr:", "compression", "tiff:", "jpeg:", "png:")
+
+
+def needs_image(chain: Chain, _value: object = None) -> Image:
+    """Check: an image is on the stack (a step working on the top image)."""
+    return chain.top()
+
+
+def needs_scene_linear(chain: Chain, _value: object = None) -> Image:
+    """Check: the top image is scene-linear (not tone-mapped)."""
+    image = chain.top()
+    if image.display:
+        raise ChainError("the image is display-referred (tone-mapped); do this before "
+                         "--tonemap or --ociodisplay")
+    return image
+
+
+def _input_files(chain: Chain, path: Path) -> list[Path]:
+    from hdrio.batch.grouping import list_images
+    from hdrio.io.paths import name_too_long
+
+    if not name_too_long(path) and path.is_dir():
+        files = list_images(path)
+        if not files:
+            raise ChainError(f"{path}: folder holds no images")
+        return files
+    if not path.exists() and str(path) not in chain.settings.get("_written", ()):
+        raise ChainError(f"{path}: no such file")
+    return [path]
+
+
+def _check_input(chain: Chain, path: Path) -> None:
+    files = _input_files(chain, path)
+    chain.inputs.extend(files)
+    if path.suffix.lower() in FLOAT_SUFFIXES and not path.is_dir():
+        from hdrio.io.header import read_header
+
+        header = read_header(path) if path.exists() else {}
+        display = header.get("hdrio:units") == "display-referred"
+        chain.images.append(Image(np.zeros((1, 1, 3), np.float32), dict(header), str(path),
+                                  display=display))
+        return
+    chain.brackets.extend(files)
+
+
+@operation("read", "FILE", help="an input file or folder", example="a.jpg", hidden=True,
+           convert=lambda values: Path(values[0]), check=_check_input)
+def read_input(chain: Chain, path: Path) -> None:
+    """A positional input: brackets wait for --merge; float images go on the stack."""
+    files = _input_files(chain, path)
+    chain.inputs.extend(files)
+    if path.is_dir() or path.suffix.lower() not in FLOAT_SUFFIXES:
+        chain.brackets.extend(files)
+        return
+    from hdrio.imageops import read_image
+    from hdrio.io.header import read_typed_attributes
+
+    pixels, alpha = read_image(path, say=chain.note, alpha=True)
+    attributes = {name: value for name, value in read_typed_attributes(path).items()
+                  if not name.startswith(_LAYOUT_PREFIXES)}
+    image = Image(pixels, attributes, str(path), alpha=alpha)
+    image.display = image.attribute("hdrio:units") == "display-referred"
+    image.scale = float(image.attribute("hdrio:exposureScale", 1.0))  # type: ignore[arg-type]
+    chain.images.append(image)
+
+
+# ------------------------------------------------------------------------ image steps
 
 
 def _stops(values: list[str]) -> float:
@@ -32,190 +101,45 @@ def _stops(values: list[str]) -> float:
     return check_number("--exposure", values[0], minimum=-64, maximum=64, hint="stops")
 
 
-# ----------------------------------------------------------------------------- inputs
-
-
-def read_input(chain: Chain, path: Path) -> None:
-    """A positional input: brackets wait for --merge; float images go on the stack."""
-    from hdrio.batch.grouping import list_images
-    from hdrio.io.paths import name_too_long
-
-    if not name_too_long(path) and path.is_dir():
-        files = list_images(path)
-        if not files:
-            raise ChainError(f"{path}: folder holds no images")
-        chain.brackets.extend(files)
-        chain.inputs.extend(files)
-        return
-    chain.inputs.append(path)  # brackets are checked by --merge, images when read
-    if path.suffix.lower() in FLOAT_SUFFIXES:
-        from hdrio.imageops import read_image
-
-        pixels, header = read_image(path, say=chain.note)
-        # Carry what describes the pixels (primaries, hdrio's provenance), not the file's
-        # layout attributes (data window, screen window...), which the writer sets anew.
-        attributes = {name: value for name, value in header.items()
-                      if name == "chromaticities" or name.startswith("hdrio:")}
-        scale = float(attributes.get("hdrio:exposureScale", 1.0))
-        chain.images.append(Image(pixels, attributes, str(path), scale=scale))
-    else:
-        chain.brackets.append(path)
-
-
-@operation("--exposures", "LIST", help="exposure times (s) of the pending brackets, in order",
-           example="a.jpg b.jpg c.jpg --exposures 1/8,1,8 --merge",
-           convert=lambda values: values[0].split(","))
-def _exposures(chain: Chain, times: list[str]) -> None:
-    chain.settings["exposures"] = times
-
-
-@operation("--exposures-from", "FILE",
-           help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV list.txt",
-           example="church_*.png --exposures-from exposures.csv --merge", convert=_one)
-def _exposures_from(chain: Chain, path: str) -> None:
-    chain.settings["exposures_from"] = path
-
-
-def _response_name(values: list[str]) -> str:
-    from hdrio.response import RESPONSE_METHODS
-
-    return RESPONSE_METHODS.canonical(values[0])
-
-
-@operation("--response", "METHOD", convert=_response_name,
-           help="camera response for the next --merge: Debevec1997 (solved; the default) or "
-                "linear (RAW and linear TIFF need no solve; RAW always uses it)",
-           example="a.tif b.tif c.tif --response linear --merge")
-def _response(chain: Chain, method: str) -> None:
-    chain.settings["response"] = method
-    chain.settings.pop("response_from", None)
-
-
-@operation("--response-from", "EXR", convert=_one,
-           help="reuse the response stored in an EXR hdrio wrote (no solve)",
-           example="d.jpg e.jpg f.jpg --response-from earlier.exr --merge")
-def _response_from(chain: Chain, path: str) -> None:
-    from hdrio.response.stored import read_response
-
-    chain.settings["response_from"] = read_response(path)
-
-
-def _multipliers(values: list[str]) -> tuple[float, ...]:
-    from hdrio.numbers import check_number
-
-    parts = values[0].split(",")
-    if len(parts) != 3:
-        raise ValueError("expected three positive multipliers R,G,B, e.g. 2.1,1,1.6")
-    return tuple(check_number("--white-balance", part, above=0.0,
-                              hint="R,G,B multipliers, e.g. 2.1,1,1.6") for part in parts)
-
-
-@operation("--white-balance", "R,G,B", convert=_multipliers,
-           help="camera RAW: white-balance multipliers for the set (default: as shot in "
-                "its first file)", example="IMG_*.CR3 --white-balance 2.1,1,1.6 --merge")
-def _white_balance(chain: Chain, multipliers: tuple[float, ...]) -> None:
-    chain.settings["white_balance"] = multipliers
-
-
-# ------------------------------------------------------------------------------ merge
-
-
-def _merge_domain(token: str) -> bool:
-    from hdrio.merge import MERGE_METHODS
-
-    try:
-        MERGE_METHODS.canonical(token)
-    except KeyError:
-        return False
-    return True
-
-
-def _merge_options(values: list[str]) -> str:
-    from hdrio.merge import MERGE_METHODS
-    from hdrio.pipeline import MergeOptions
-
-    return MERGE_METHODS.canonical(values[0]) if values else MergeOptions().merge
-
-
-@operation("--merge", optional="METHOD", accepts_optional=_merge_domain, convert=_merge_options,
-           help="merge the pending brackets into scene-linear radiance (estimator: "
-                "inverse-variance, the default, Poisson, log (the tutorial's) or linear)",
-           example="a.jpg b.jpg c.jpg --merge linear -o out.exr")
-def _merge(chain: Chain, domain: str) -> None:
-    from hdrio.io.brackets import read_brackets
-    from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
-
-    if not chain.brackets:
-        raise ChainError("no brackets to merge: give the bracket files before --merge")
-    settings = chain.settings
-    stack = read_brackets(chain.brackets, exposures=settings.pop("exposures", None),
-                          exposures_from=settings.pop("exposures_from", None),
-                          progress=chain.progress.bar,
-                          white_balance=settings.get("white_balance"))
-    options = MergeOptions(response=settings.get("response", "Debevec1997"), merge=domain)
-    result = merge_stack(stack, options, chain.progress.step,
-                         response=settings.get("response_from"))
-    chain.brackets = []
-    chain.last_merge = result
-    radiance = result.radiance
-    if result.colour is not None:  # the input encoding's primaries -> the working space
-        from hdrio.cms.stage import output_radiance
-
-        radiance = output_radiance(radiance, result.colour, options.output_space,
-                                   options.ocio_config)
-    chain.images.append(Image(radiance, exr_attributes(result),
-                              f"merge of {stack.count} brackets"))
-
-
-# ------------------------------------------------------------------------ image steps
-
-
-@operation("--exposure", "STOPS", convert=_stops,
-           help="scale the scene-linear image by 2^STOPS", example="--exposure -1.5")
+@operation("--exposure", "STOPS", convert=_stops, check=needs_scene_linear,
+           help="scale the scene-linear image by 2^STOPS",
+           example="out.exr --exposure -1.5 -o darker.exr")
 def _exposure(chain: Chain, stops: float) -> None:
     from hdrio.imageops import apply_exposure
 
-    image = chain.top()
-    if image.display:
-        raise ChainError("the image is display-referred; change exposure before --tonemap")
+    image = needs_scene_linear(chain)
+    image.statistics = None
     image.pixels = apply_exposure(image.pixels, stops)
     image.scale *= 2.0**stops
 
 
-def _tonemap_arguments(values: list[str]) -> tuple[str, dict[str, float]]:
-    from hdrio.tonemap import TONEMAP_METHODS
-
-    name = TONEMAP_METHODS.canonical(values[0])
-    parameters: dict[str, float] = {}
-    for item in values[1].split(",") if len(values) > 1 else []:
-        key, _, text = item.partition("=")
-        try:
-            parameters[key.strip()] = float(text)
-        except ValueError:
-            raise ValueError(f"parameter {item!r}: expected NAME=NUMBER") from None
-    from hdrio.numbers import check_tonemap_parameters
-
-    check_tonemap_parameters(name, parameters)
-    return name, parameters
+def _tonemap_check(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
+    needs_scene_linear(chain).display = True
 
 
-@operation("--tonemap", "OPERATOR", optional="NAME=VALUE,...", convert=_tonemap_arguments,
+@operation("--tonemap", "OPERATOR", optional="NAME=VALUE,...", convert=tonemap_arguments,
            accepts_optional=lambda token: "=" in token and not token.startswith("-"),
+           check=_tonemap_check,
            help="tone-map to a display image (sRGB): reinhard-global, reinhard-local, "
                 "their -tutorial variants; optional operator parameters",
-           example="--tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
+           example="out.exr --tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
 def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
+    from hdrio.cms.luminance import DEFAULT_SPACE
+    from hdrio.cms.spaces import colour_science_name
+    from hdrio.cms.stage import display_attributes
     from hdrio.pipeline import render_preview
 
     name, parameters = value
-    image = chain.top()
-    if image.display:
-        raise ChainError("the image is already tone-mapped")
+    image = needs_scene_linear(chain)
     try:
-        image.pixels = render_preview(image.pixels, name, **parameters)
-    except TypeError:
-        raise ChainError(f"{name} takes no parameter {', '.join(parameters)}") from None
-    image.display = True
+        space = colour_science_name(str(image.attribute("hdrio:colorSpace",
+                                                        "lin_rec709_scene")),
+                                    chain.settings.get("ocio_config")) or DEFAULT_SPACE
+    except HdrioError:  # a space the config does not know: luminance as Rec.709
+        space = DEFAULT_SPACE
+    image.pixels = render_preview(image.pixels, name, space, **parameters)
+    image.attributes = display_attributes(image.attributes, f"{name} (sRGB)")
+    image.display, image.statistics = True, None
 
 
 def _size(values: list[str]) -> str:
@@ -224,9 +148,9 @@ def _size(values: list[str]) -> str:
     return values[0]
 
 
-@operation("--resize", "SIZE", convert=_size,
+@operation("--resize", "SIZE", convert=_size, check=needs_image,
            help="resample to WIDTHxHEIGHT (a 0 keeps the aspect ratio) or to N%",
-           example="--resize 1024x0")
+           example="out.exr --resize 300x0 -o small.exr")
 def _resize(chain: Chain, size: str) -> None:
     from hdrio.imageops import resize
 
@@ -241,4 +165,8 @@ def _resize(chain: Chain, size: str) -> None:
             raise ChainError("at most one of width and height may be 0")
         new_width = new_width or round(width * new_height / height)
         new_height = new_height or round(height * new_width / width)
-    image.pixels = resize(image.pixels, max(1, new_width), max(1, new_height))
+    size_ = max(1, new_width), max(1, new_height)
+    image.pixels = resize(image.pixels, *size_)
+    if image.alpha is not None:
+        image.alpha = resize(image.alpha, *size_)
+    image.statistics = None

@@ -1,23 +1,16 @@
 """Chain operations that write, describe and configure: ``-o``, ``-d``, ``--compression``,
-``--info``, ``--stats``, and the global settings ``-v``, ``--threads``, ``--dry-run``,
-``--group``.
+``--info``, ``--stats``, and the global settings ``-v``, ``--threads``, ``--dry-run``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from hdrio.cli.chain import (
-    IMAGE_SUFFIXES,
-    Chain,
-    ChainError,
-    Step,
-    one_argument,
-    operation,
-    step_message,
-)
-from hdrio.cli.commands import _check_outputs
-from hdrio.errors import HdrioError
+import numpy as np
+
+from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, check_output, make_parent
+from hdrio.cli.registry import Chain, ChainError, Image, one_argument, operation
+from hdrio.cli.values import positive_whole
 
 _COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
 _one = one_argument
@@ -51,7 +44,7 @@ def _compression_name(values: list[str]) -> str:
 
 @operation("-d", "TYPE", convert=_pixel_type,
            help="pixel type of the following EXR outputs: half (default) or float",
-           example="-d float -o out.exr")
+           example="a.jpg b.jpg c.jpg --merge -d float -o float.exr")
 def _data_type(chain: Chain, value: str) -> None:
     chain.settings["data_type"] = value
 
@@ -59,7 +52,7 @@ def _data_type(chain: Chain, value: str) -> None:
 @operation("--compression", "NAME", convert=_compression_name,
            help=f"compression of the following EXR outputs: {', '.join(_COMPRESSIONS)} "
                 "(default zip; dwaa:45 sets a level)",
-           example="--compression piz -o out.exr")
+           example="a.jpg b.jpg c.jpg --merge --compression piz -o piz.exr")
 def _compression(chain: Chain, value: str) -> None:
     chain.settings["compression"] = value
 
@@ -73,66 +66,81 @@ def output_path(chain: Chain, text: str) -> Path:
     return fill_pattern(text, chain.fields or PATTERN_FIELDS)
 
 
-@operation("-o", "FILE", convert=_one,
-           help="write the top image: EXR for scene-linear (with hdrio's header), JPEG, PNG "
-                "or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
-           example="-o {first_stem}_hdr.exr")
+def _check_output(chain: Chain, text: str) -> None:
+    image = chain.top()
+    path = Path(text)
+    check_output(path, EXR_SUFFIXES | PREVIEW_SUFFIXES,
+                 [str(p) for p in chain.inputs] + [str(p) for p in chain.brackets])
+    if path.suffix.lower() != ".exr" and not image.display:
+        raise ChainError("the image is scene-linear; tone-map it first "
+                         "(--tonemap reinhard-global) or write an .exr")
+    if _pattern_free(path):
+        chain.settings.setdefault("_written", []).append(str(path))
+    else:
+        output_path(Chain(), text)  # the pattern's syntax and fields, now
+
+
+@operation("-o", "FILE", convert=_one, check=_check_output,
+           help="write the top image (making missing folders): EXR for scene-linear (with "
+                "hdrio's header; a tone-mapped image is labelled display-referred), JPEG, "
+                "PNG or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
+           example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
     from hdrio.io.write import write_exr, write_preview
-    from hdrio.pipeline import half_safe_scale
+    from hdrio.pipeline import write_radiance
 
     image = chain.top()
     path = output_path(chain, text)
-    _check_outputs(path if path.suffix.lower() == ".exr" else None,
-                   None if path.suffix.lower() == ".exr" else path,
-                   [str(p) for p in chain.inputs])
+    check_output(path, EXR_SUFFIXES | PREVIEW_SUFFIXES, [str(p) for p in chain.inputs])
+    if path.suffix.lower() != ".exr" and not image.display:
+        raise ChainError("the image is scene-linear; tone-map it first "
+                         "(--tonemap reinhard-global) or write an .exr")
+    make_parent(path)
+    data_type = chain.settings.get("data_type", "half")
+    compression = chain.settings.get("compression", "zip")
+    report = None
     if path.suffix.lower() != ".exr":
-        if not image.display:
-            raise ChainError("the image is scene-linear; tone-map it first "
-                             "(--tonemap reinhard-global) or write an .exr")
         write_preview(path, image.pixels)
+    elif image.display:
+        pixels = image.pixels if image.alpha is None else np.concatenate(
+            [image.pixels, image.alpha], axis=-1)
+        write_exr(path, pixels, image.attributes, pixel_type=data_type,
+                  compression=compression)
     else:
-        data_type = chain.settings.get("data_type", "half")
-        scale = half_safe_scale(image.pixels) if data_type == "half" else 1.0
-        attributes = dict(image.attributes)
-        if not image.display:
-            attributes["hdrio:exposureScale"] = float(image.scale * scale)
-        pixels = image.pixels * scale if scale != 1.0 else image.pixels
-        write_exr(path, pixels, attributes, pixel_type=data_type,
-                  compression=chain.settings.get("compression", "zip"))
+        report = merge_report(image)
+        layers = {name: layer for name, layer in image.layers.items()
+                  if layer.shape[:2] == image.pixels.shape[:2]}
+        write_radiance(path, image.pixels, image.attributes, pixel_type=data_type,
+                       compression=compression, scale=image.scale, alpha=image.alpha,
+                       observe=None if report is None else report.add, layers=layers)
     chain.progress.step(f"wrote {path}")
     chain.say(f"wrote {path}")
+    if report is not None and chain.settings.get("report"):
+        from hdrio.cms.checks import format_report
+
+        chain.say(format_report(report.report(str(path))))
 
 
-def check_outputs(steps: list[Step]) -> None:
-    """Refuse bad ``-o`` names before any work (type, folder, overwriting an input)."""
-    inputs = [str(step.value) for step in steps if step.name == "read"]
-    for step in steps:
-        if step.name != "-o":
-            continue
-        path = Path(step.value)
-        suffix = path.suffix.lower()
-        if suffix not in IMAGE_SUFFIXES | {".exr"}:
-            raise ChainError(f"{step.text}: unsupported output type; use .exr, "
-                             f"{', '.join(sorted(IMAGE_SUFFIXES))}")
-        if not _pattern_free(path):
-            try:
-                output_path(Chain(), step.value)  # the pattern's syntax, now
-            except HdrioError as error:
-                raise ChainError(step_message(step, error)) from None
-        else:
-            try:
-                _check_outputs(path if suffix == ".exr" else None,
-                               None if suffix == ".exr" else path, inputs)
-            except HdrioError as error:
-                raise ChainError(step_message(step, error)) from None
+def merge_report(image: Image):
+    """A streaming check (:class:`hdrio.cms.checks.StreamingCheck`) of the image's EXR,
+    fed band by band as it is written, or ``None`` for an image that is not RGB."""
+    from hdrio.cms.checks import StreamingCheck
+
+    if image.pixels.shape[-1] != 3:
+        return None
+    return StreamingCheck.for_attributes(image.attributes)
 
 
 # ------------------------------------------------------------------------ information
 
 
+def _check_info(chain: Chain, _values: list[str]) -> None:
+    if not (chain.brackets and not chain.images):
+        chain.top()
+
+
 @operation("--info", help="print what the top image is: size, channels, provenance",
-           example="in.exr --info")
+           example="out.exr --info", check=_check_info)
 def _info(chain: Chain, _values: list[str]) -> None:
     if not chain.images and chain.brackets:
         chain.say(f"{len(chain.brackets)} brackets waiting for --merge: "
@@ -144,14 +152,16 @@ def _info(chain: Chain, _values: list[str]) -> None:
     chain.say(f"{image.label}: {width}x{height}, {channels} channels, {kind}")
     for name in ("hdrio:responseMethod", "hdrio:exposureSource", "hdrio:mergeDomain"):
         if name in image.attributes:
-            chain.say(f"  {name:24s} {image.attributes[name]}")
-    sources = image.attributes.get("hdrio:sourceFiles")
+            chain.say(f"  {name:24s} {image.attribute(name)}")
+    sources = image.attribute("hdrio:sourceFiles")
     if sources:
         chain.say(f"  {'hdrio:sourceFiles':24s} {', '.join(map(str, sources))}")
 
 
 @operation("--stats", help="print per-channel min, max, mean, NaN/Inf/negative counts and "
-                           "the dynamic range in stops", example="--merge --stats")
+                           "the dynamic range in stops",
+           example="a.jpg b.jpg c.jpg --merge --stats",
+           check=lambda chain, _values: chain.top())
 def _stats(chain: Chain, _values: list[str]) -> None:
     from hdrio.imageops import image_statistics
 
@@ -167,21 +177,17 @@ def _stats(chain: Chain, _values: list[str]) -> None:
 # ------------------------------------------------------------------- global settings
 
 
-@operation("-v", help="print each step and its progress on stderr", example="-v a.jpg ...",
-           per_set=False)
+@operation("-v", help="print each step and its progress on stderr, and a check of each "
+                      "merge's EXR as written (as 'hdrio check' prints it)",
+           example="-v a.jpg b.jpg c.jpg --merge -o out.exr", per_set=False)
 def _verbose(chain: Chain, _values: list[str]) -> None:
     chain.progress.quiet = False
+    chain.settings["report"] = True
 
 
-def _count(values: list[str]) -> int:
-    if not values[0].isdigit() or int(values[0]) < 1:
-        raise ValueError(f"expected a positive whole number, got {values[0]!r}")
-    return int(values[0])
-
-
-@operation("--threads", "N", convert=_count, per_set=False,
+@operation("--threads", "N", convert=positive_whole, per_set=False,
            help="threads for OpenImageIO, and processes for merging bracket sets (--group)",
-           example="--threads 4")
+           example="--threads 4 a.jpg b.jpg c.jpg --merge -o out.exr")
 def _threads(chain: Chain, count: int) -> None:
     import OpenImageIO as oiio
 
@@ -194,13 +200,3 @@ def _threads(chain: Chain, count: int) -> None:
                 "and do nothing", example="shoot/ --group --merge -o {first_stem}.exr --dry-run")
 def _dry_run(chain: Chain, _values: list[str]) -> None:
     chain.dry_run = True
-
-
-@operation("--group", help="split the pending brackets into bracket sets (capture time, "
-                           "exposure pattern, sequence) and run the rest of the chain on "
-                           "each set, in parallel; sets already done from the same "
-                           "inputs and settings are skipped (--force redoes them)",
-           example="shoot/ --group --merge -o {first_stem}_hdr.exr")
-def _group(chain: Chain, _values: list[str]) -> None:  # run by chain.run_steps
-    raise AssertionError("--group is run by run_steps")
-

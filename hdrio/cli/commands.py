@@ -7,139 +7,121 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
+from hdrio.cli.options import (
+    add_arguments,
+    merge_options,
+    settings_from_namespace,
+    tonemap_arguments,
+)
+from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
-from hdrio.merge.debevec1997 import SATURATION_POLICIES
-from hdrio.merge.estimators import MERGE_METHODS
-from hdrio.merge.weighting import WEIGHTING_METHODS
+from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
+from hdrio.errors import HdrioError
 from hdrio.pipeline import MergeOptions, MergeResult, merge_files
-from hdrio.response import RESPONSE_METHODS, SAMPLING_METHODS
-from hdrio.skips import SKIPS
 from hdrio.tonemap import TONEMAP_METHODS
-
-_WRITABLE = {".exr"}
-_PREVIEW = {".jpg", ".jpeg", ".png", ".tif", ".tiff"}
-
-
-def _colour(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated integers, got {text!r}") from None
-
-
-def _add_merge_options(parser: argparse.ArgumentParser) -> None:
-    defaults = MergeOptions()
-    group = parser.add_argument_group("response and merge")
-    group.add_argument("--response", default=defaults.response, metavar="METHOD",
-                       help=f"response recovery: {', '.join(RESPONSE_METHODS.names())}")
-    group.add_argument("--lambda", dest="smoothing", type=float, default=defaults.smoothing,
-                       help="smoothness weight lambda (default %(default)g)")
-    group.add_argument("--samples", type=int, default=None,
-                       help="pixels sampled for the solve (default: 1000; 'tutorial' "
-                            "sampling computes its own)")
-    group.add_argument("--sampling", default=defaults.sampling,
-                       help=f"sample selection: {', '.join(SAMPLING_METHODS.names())} "
-                            "(default %(default)s)")
-    group.add_argument("--weighting", default=defaults.weighting,
-                       help=f"weighting function: {', '.join(WEIGHTING_METHODS.names())} "
-                            "(default %(default)s)")
-    group.add_argument("--merge", default=defaults.merge, metavar="METHOD",
-                       help=f"merge estimator: {', '.join(MERGE_METHODS.names())} "
-                            "(default %(default)s: weights from the stack's noise model; "
-                            "'log' is the tutorial's)")
-    group.add_argument("--saturation", default=defaults.saturation,
-                       choices=SATURATION_POLICIES,
-                       help="a code at the top of the range drops that channel ('channel') "
-                            "or the whole pixel ('pixel', the tutorial's policy) from its "
-                            "bracket and every longer one (default %(default)s)")
-    group.add_argument("--exclude-color", type=_colour, default=None, metavar="R,G,B",
-                       help="never sample pixels of this code value in any bracket "
-                            "(e.g. 0,0,255 for registration borders)")
-    group.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
-    group.add_argument("--response-from", metavar="EXR", default=None,
-                       help="use the camera response saved in an EXR written by hdrio "
-                            "instead of solving (skips the solve)")
-    group.add_argument("--uncertainty", action="store_true",
-                       help="also write each pixel's predicted relative standard deviation "
-                            "(from the noise model) as the EXR layer 'uncertainty'")
-    group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
-                       choices=[*SKIPS, "all"],
-                       help="turn off one of the work skips (repeatable): "
-                            f"{', '.join(SKIPS)}, or all (see docs/speed.md)")
-
-
-def options_from(args: argparse.Namespace) -> MergeOptions:
-    # Resolve names now, so a typo fails before any image is read.
-    return MergeOptions(
-        response=RESPONSE_METHODS.canonical(args.response), smoothing=args.smoothing,
-        weighting=WEIGHTING_METHODS.canonical(args.weighting),
-        sampling=SAMPLING_METHODS.canonical(args.sampling), samples=args.samples,
-        merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
-        seed=args.seed, saturation=args.saturation, response_from=args.response_from,
-        uncertainty=args.uncertainty,
-        no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
-        **colour_fields(args),
-    )
 
 
 def add_merge(sub) -> None:
     parser = sub.add_parser(
         "merge", help="merge brackets into a scene-linear EXR",
-        description="Merge bracketed exposures into one scene-linear OpenEXR.",
+        description="Merge bracketed exposures into one scene-linear OpenEXR. Every "
+                    "option below means the same in a chain's --merge (hdrio --help).",
         epilog="example: hdrio merge church_*.png --exposures-from exposures.csv "
                "-o church.exr --preview church.jpg",
     )
     parser.add_argument("images", nargs="+", help="bracketed 8- or 16-bit images")
-    parser.add_argument("-o", "--output", required=True, help="output OpenEXR file")
-    parser.add_argument("--preview", help="also write a tone-mapped preview (jpg, png, tif)")
-    parser.add_argument("--tonemap", default="reinhard-global",
-                        help=f"preview operator: {', '.join(TONEMAP_METHODS.names())} "
-                             "(default %(default)s)")
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument("--exposures", help="exposure times in seconds, in image order, "
-                                            "comma-separated: 1/8,1,8")
-    source.add_argument("--exposures-from", metavar="FILE",
-                        help="sidecar list: CSV (file,exposure_time_s) or OpenCV list.txt")
+    parser.add_argument("-o", "--output", required=True,
+                        help="output OpenEXR file (missing folders are made)")
     parser.add_argument("-d", "--data-type", choices=["half", "float"], default="half",
                         help="EXR pixel type (default %(default)s)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
-    _add_merge_options(parser)
-    add_colour_options(parser)
+    preview = parser.add_argument_group("preview")
+    preview.add_argument("--preview", help="also write a tone-mapped preview (jpg, png, tif)")
+    preview.add_argument("--tonemap", nargs="+", default=["reinhard-global"],
+                         metavar=("OPERATOR", "NAME=VALUE,"),
+                         help=f"preview operator ({', '.join(TONEMAP_METHODS.names())}; "
+                              "default reinhard-global) and its parameters, e.g. "
+                              "--tonemap reinhard-global key=0.18,white=8")
+    preview.add_argument("--ociodisplay", nargs=2, metavar=("DISPLAY", "VIEW"),
+                         help="render the preview through this OpenColorIO display and view "
+                              "instead of --tonemap, e.g. 'sRGB - Display' 'ACES 2.0 - SDR "
+                              "100 nits (Rec.709)'")
+    preview.add_argument("--ocio-display", help=argparse.SUPPRESS)  # older spelling
+    preview.add_argument("--ocio-view", help=argparse.SUPPRESS)  # older spelling
+    add_arguments(parser)
     parser.set_defaults(run=run_merge)
 
 
-def _check_outputs(output: Path, preview: Path | None, inputs: list[str]) -> None:
-    """Refuse bad output paths before any work, so failures never leave partial files."""
-    from hdrio.io.paths import check_outputs
+def display_view_from(args: argparse.Namespace, config: str | None
+                      ) -> tuple[str, str] | None:
+    """``(display, view)`` for the preview, checked against the config, or ``None``."""
+    from hdrio.cms.spaces import display_view_names
 
-    check_outputs([(path, allowed) for path, allowed in ((output, _WRITABLE),
-                                                         (preview, _PREVIEW))
-                   if path is not None], inputs)
+    display, view = args.ociodisplay or (None, None)
+    display, view = args.ocio_display or display, args.ocio_view or view
+    if not display:
+        if view:
+            raise HdrioError("--ocio-view needs --ociodisplay DISPLAY VIEW")
+        return None
+    return display_view_names(display, view, config)
 
 
 def run_merge(args: argparse.Namespace) -> int:
+    # Everything is checked before any image is read: names, values, colour spaces,
+    # displays, output folders.
     output = Path(args.output)
     preview = Path(args.preview) if args.preview else None
-    _check_outputs(output, preview, args.images)
-    TONEMAP_METHODS.canonical(args.tonemap)
-    options = options_from(args)
-    display_view = display_view_from(args)
-    progress = Progress(quiet=args.quiet)
-    result = merge_files(
-        args.images, output, preview=preview, tonemap=args.tonemap,
-        exposures=args.exposures.split(",") if args.exposures else None,
-        exposures_from=args.exposures_from, options=options, pixel_type=args.data_type,
-        progress=progress.step, read_progress=progress.bar,
-        display_view=display_view,
-    )
-    label = " / ".join(display_view) if display_view else args.tonemap
-    print(summary(result, output, preview, label, args.data_type))
-    from hdrio.cms.checks import check_exr, format_report
+    from hdrio.io.paths import check_outputs
 
-    print(format_report(check_exr(output)))  # the written file, as a reader will see it
+    check_outputs([(path, allowed) for path, allowed in ((output, EXR_SUFFIXES),
+                                                         (preview, PREVIEW_SUFFIXES))
+                   if path is not None], args.images)
+    if len(args.tonemap) > 2:
+        raise HdrioError(f"--tonemap {' '.join(args.tonemap)}: expected OPERATOR "
+                         "[NAME=VALUE,...]")
+    try:
+        tonemap, parameters = tonemap_arguments(args.tonemap)
+    except (ValueError, KeyError) as error:
+        message = error.args[0] if error.args else error
+        raise HdrioError(f"--tonemap {' '.join(args.tonemap)}: {message}") from None
+    settings = settings_from_namespace(args)
+    options = merge_options(settings)
+    display_view = display_view_from(args, options.ocio_config)
+    for path in args.images:
+        if not Path(path).is_file():
+            raise HdrioError(f"{path}: no such file")
+    for path in (output, preview):
+        if path is not None:
+            make_parent(path)
+    progress = Progress(quiet=args.quiet)
+    check = merge_check(options)
+    result = merge_files(
+        args.images, output, preview=preview, tonemap=tonemap,
+        tonemap_parameters=parameters, exposures=settings.get("exposures"),
+        exposures_from=settings.get("exposures_from"), options=options,
+        pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
+        display_view=display_view, observe=check.add,
+    )
+    label = " / ".join(display_view) if display_view else tonemap
+    report = merge_report(check, result, output)
+    print(summary(result, output, preview, label, args.data_type, report))
+    # The written file as 'hdrio check' reads it: counted from its bands as they were
+    # written, not read back.
+    print(format_report(report))
     return 0
+
+
+def merge_check(options) -> StreamingCheck:
+    """The check to feed with a merge's EXR bands as they are written."""
+    from hdrio.cms.spaces import chromaticities
+
+    return StreamingCheck(chromaticities(options.output_space, options.ocio_config),
+                          units="cd/m^2" if options.calibration is not None else "relative")
+
+
+def merge_report(check: StreamingCheck, result: MergeResult, output: Path) -> CheckReport:
+    stats = result.statistics
+    return check.report(str(output), clipped_fraction=stats.clipped_everywhere / stats.pixels)
 
 
 def _seconds(t: float) -> str:
@@ -147,11 +129,12 @@ def _seconds(t: float) -> str:
 
 
 def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: str,
-            data_type: str) -> str:
+            data_type: str, report: CheckReport) -> str:
+    """What the merge did, from its own statistics and ``report`` (the EXR's check)."""
     stack, stats, times = result.stack, result.statistics, result.timings
     height, width, channels = stack.shape
     bits = 8 if stack.code_max == 255 else 16
-    full, robust = result.dynamic_range_stops
+    full, robust = report.dynamic_range_stops, report.robust_range_stops
     params = result.response.parameters
     lines = [
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), "
@@ -236,9 +219,12 @@ def run_demo(args: argparse.Namespace) -> int:
     progress.step(f"rendering {len(DEMO_EXPOSURES)} synthetic brackets into {folder}")
     truth, files = write_demo_brackets(folder)
     output, preview = folder / "demo.exr", folder / "demo_preview.jpg"
+    options = MergeOptions()
+    check = merge_check(options)
     result = merge_files(files, output, preview=preview, progress=progress.step,
-                         read_progress=progress.bar)
-    print(summary(result, output, preview, "reinhard-global", "half"))
+                         read_progress=progress.bar, options=options, observe=check.add)
+    print(summary(result, output, preview, "reinhard-global", "half",
+                  merge_report(check, result, output)))
     mask = well_exposed(result.stack.codes, result.stack.code_max)
     error = radiance_error(result.radiance, truth, mask)
     print(f"truth:     relative radiance error after one global scale, on the "

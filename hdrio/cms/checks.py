@@ -63,16 +63,21 @@ def dynamic_range_stops(Y: np.ndarray) -> tuple[float, float]:
     return float(np.log2(Y.max() / Y.min())), float(np.log2(high / low))
 
 
+def check_chart_region(region: Region, width: int, height: int) -> None:
+    """Raise unless the 6 x 4 chart ``region`` lies inside a ``width x height`` image."""
+    x, y, w, h = region
+    if w < 12 or h < 8 or x < 0 or y < 0 or x + w > width or y + h > height:
+        raise HdrioError(f"chart region {x},{y},{w},{h} must lie inside the {width}x{height} "
+                         "image and span at least 2 pixels per patch")
+
+
 def chart_patches(rgb: np.ndarray, region: Region) -> np.ndarray:
     """Mean RGB ``(24, 3)`` of the central half of each patch of a 6 x 4 chart region.
 
     Patches in reading order, dark skin at top left, black at bottom right.
     """
     x, y, w, h = region
-    height, width = rgb.shape[:2]
-    if w < 12 or h < 8 or x < 0 or y < 0 or x + w > width or y + h > height:
-        raise HdrioError(f"chart region {x},{y},{w},{h} must lie inside the {width}x{height} "
-                         "image and span at least 2 pixels per patch")
+    check_chart_region(region, rgb.shape[1], rgb.shape[0])
     means = []
     for row in range(4):
         for column in range(6):
@@ -152,9 +157,139 @@ def check_pixels(rgb: np.ndarray, chromaticities: tuple[float, ...] = REC709_D65
         delta_E=None if chart is None else chart_delta_E(rgb, chart, chromaticities))
 
 
+def _gamut_matrix(chromaticities: tuple[float, ...], gamut: str | None) -> np.ndarray | None:
+    """RGB (own primaries) to ``gamut`` RGB, Bradford-adapted; ``None`` for own primaries."""
+    if gamut is None:
+        return None
+    import colour
+
+    space = colour.RGB_COLOURSPACES[gamut]
+    return space.matrix_XYZ_to_RGB @ colour.adaptation.matrix_chromatic_adaptation_VonKries(
+        colour.xy_to_XYZ(np.asarray(chromaticities[6:8])),
+        colour.xy_to_XYZ(space.whitepoint), transform="Bradford") @ rgb_to_xyz_matrix(
+        chromaticities)
+
+
+# Luminance histogram of StreamingCheck: the float32 bit pattern of a positive number,
+# shifted right by this many bits, orders bins of relative width 2**-(23 - shift).
+_BIN_SHIFT = 12
+_BINS = 1 << (31 - _BIN_SHIFT)
+
+
+class StreamingCheck:
+    """The checks of :func:`check_pixels`, fed band by band (constant memory).
+
+    ``add(rows)`` takes ``(rows, W, C)`` pixels (first three channels RGB, any float
+    dtype) as stored; :meth:`report` gives the :class:`CheckReport`. Minimum, maximum,
+    counts and gamut are exact; luminance percentiles come from a histogram of
+    luminance with bins 2**-11 (0.05 %) wide in relative terms, so they are within
+    0.05 % of the exact order statistics. ``hdrio check`` and the report after a merge
+    (fed as the EXR is written) both use it, so they print the same numbers.
+    """
+
+    def __init__(self, chromaticities: tuple[float, ...] = REC709_D65, *,
+                 units: str = "relative", clipped_fraction: float | None = None,
+                 gamut: str | None = None) -> None:
+        self.chromaticities = tuple(float(v) for v in chromaticities)
+        self.units, self.clipped_fraction, self.gamut = units, clipped_fraction, gamut
+        self._weights = rgb_to_xyz_matrix(self.chromaticities)[1].astype(np.float32)
+        self._to_gamut = _gamut_matrix(self.chromaticities, gamut)
+        self._counts = np.zeros(_BINS, dtype=np.int64)
+        self.pixels = self.negative = self.non_finite = self.outside = 0
+        self._low, self._high = np.inf, 0.0
+
+    @classmethod
+    def for_attributes(cls, attributes: dict[str, object], **kwargs) -> StreamingCheck:
+        """A check of an image whose header is ``attributes`` (chromaticities, units)."""
+        def plain(name: str, default: object) -> object:
+            value = attributes.get(name, default)
+            return getattr(value, "value", value)
+
+        clipped = plain("hdrio:clippedFraction", None)
+        return cls(tuple(plain("chromaticities", REC709_D65)),  # type: ignore[arg-type]
+                   units=str(plain("hdrio:units", "unknown")),
+                   clipped_fraction=None if clipped is None else float(clipped),  # type: ignore[arg-type]
+                   **kwargs)
+
+    def add(self, rows: np.ndarray) -> None:
+        """Count one band ``(rows, W, C)`` of the image."""
+        rows = np.asarray(rows)
+        if rows.shape[-1] == 1:  # greyscale: Y as equal R, G, B
+            rows = np.repeat(rows, 3, axis=-1)
+        rgb = rows[..., :3].astype(np.float32, copy=False).reshape(-1, 3)
+        Y = rgb @ self._weights
+        # Y is finite exactly when every channel is (the weights are positive).
+        finite = np.isfinite(Y)
+        lowest = _channel_minimum(rgb)
+        self.pixels += Y.size
+        self.non_finite += int(Y.size - np.count_nonzero(finite))
+        self.negative += int(np.count_nonzero(lowest < 0))
+        if self._to_gamut is not None:
+            lowest = _channel_minimum(rgb @ self._to_gamut.T.astype(np.float32))
+        # Outside: a channel below -1e-6 of the pixel's luminance (float rounding is not).
+        self.outside += int(np.count_nonzero((lowest < -1e-6 * np.abs(Y)) & finite))
+        positive = Y[(Y > 0) & finite]
+        if positive.size:
+            self._low = min(self._low, float(positive.min()))
+            self._high = max(self._high, float(positive.max()))
+            self._counts += np.bincount(positive.view(np.int32) >> _BIN_SHIFT,
+                                        minlength=_BINS)
+
+    def _order_statistic(self, cumulative: np.ndarray, k: int) -> float:
+        """The ``k``-th smallest luminance (0-based): its bin's centre, within the
+        exact extremes."""
+        index = int(np.searchsorted(cumulative, k + 1))
+        centre = np.array([(index << _BIN_SHIFT) + (1 << (_BIN_SHIFT - 1))],
+                          dtype=np.int32).view(np.float32)[0]
+        return min(max(float(centre), self._low), self._high)
+
+    def _percentile(self, q: float) -> float:
+        """As ``numpy.percentile`` (linear between order statistics), from the bins."""
+        cumulative = np.cumsum(self._counts)
+        rank = q / 100.0 * (int(cumulative[-1]) - 1)
+        k = int(np.floor(rank))
+        low = self._order_statistic(cumulative, k)
+        if rank == k:
+            return low
+        high = self._order_statistic(cumulative, k + 1)
+        return low + (rank - k) * (high - low)
+
+    def report(self, source: str = "", clipped_fraction: float | None = None
+               ) -> CheckReport:
+        """The :class:`CheckReport` of everything added so far."""
+        counted = int(self._counts.sum())
+        percentiles: dict[str, float] = {}
+        full = robust = 0.0
+        if counted:
+            percentiles = {name: self._percentile(q)
+                           for name, q in (("p1", 1), ("median", 50), ("p99", 99))}
+            full = float(np.log2(self._high / self._low))
+            robust = float(np.log2(self._percentile(99.9) / self._percentile(0.1)))
+        clipped = self.clipped_fraction if clipped_fraction is None else clipped_fraction
+        return CheckReport(
+            pixels=self.pixels, units=self.units, dynamic_range_stops=full,
+            robust_range_stops=robust, luminance_percentiles=percentiles,
+            negative=self.negative, non_finite=self.non_finite,
+            out_of_gamut=self.outside / max(self.pixels, 1),
+            gamut="own primaries" if self.gamut is None else self.gamut,
+            clipped_fraction=clipped, source=source)
+
+
+def _channel_minimum(rgb: np.ndarray) -> np.ndarray:
+    """Per-pixel minimum of ``(N, 3)`` values (column by column: ``min(axis=1)`` over
+    three values is several times slower)."""
+    return np.minimum(np.minimum(rgb[:, 0], rgb[:, 1]), rgb[:, 2])
+
+
+_ROWS_PER_READ = 128
+
+
 def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | None = None
               ) -> CheckReport:
-    """Read ``path`` (RGB channels, any EXR) and run :func:`check_pixels` on it."""
+    """Check ``path`` (RGB channels, any EXR) band by band with :class:`StreamingCheck`.
+
+    Memory stays at a band of 128 rows (plus the chart region's rows when given).
+    """
     import OpenImageIO as oiio
 
     from hdrio.io.header import read_header
@@ -164,28 +299,44 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     if image is None:
         raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
     try:
-        names = list(image.spec().channelnames)
+        spec = image.spec()
+        names = list(spec.channelnames)
         grey = not {"R", "G", "B"} <= set(names) and "Y" in names
         if not grey and not {"R", "G", "B"} <= set(names):
             raise InputError(path, f"has channels {','.join(names)}; checks need R, G, B "
                                    "(or Y alone)")
-        pixels = image.read_image("float")
-        if pixels is None:
-            raise InputError(path, f"cannot decode pixels ({library_message(image.geterror)})")
+        # Greyscale: Y as equal R, G, B (whose luminance is Y whatever the primaries).
+        order = [names.index(c) for c in ("YYY" if grey else "RGB")]
+        layer = [names.index(n) for n in names if n.startswith("uncertainty.")]
+        samples = []  # every 4th row and column of the uncertainty layer
+        check = StreamingCheck.for_attributes(header, gamut=gamut)
+        delta_E = None
+        for top in range(spec.y, spec.y + spec.height, _ROWS_PER_READ):
+            bottom = min(top + _ROWS_PER_READ, spec.y + spec.height)
+            # Half files are read as half (half the bytes to convert); add() widens a band.
+            rows = image.read_scanlines(0, 0, top, bottom, 0, 0, spec.nchannels,
+                                        "half" if str(spec.format) == "half" else "float")
+            if rows is None or image.has_error:
+                raise InputError(path, f"cannot decode pixels "
+                                       f"({library_message(image.geterror)})")
+            rows = np.asarray(rows).reshape(bottom - top, spec.width, -1)
+            check.add(rows[..., order])
+            if layer:
+                samples.append(np.array(rows[::4, ::4][..., layer], dtype=np.float32))
+        if chart is not None:  # read the chart's rows only
+            x, y, w, h = chart
+            check_chart_region(chart, spec.width, spec.height)
+            rows = image.read_scanlines(0, 0, spec.y + y, spec.y + y + h, 0, 0,
+                                        spec.nchannels, "float")
+            band = np.asarray(rows).reshape(h, spec.width, -1)[..., order]
+            delta_E = chart_delta_E(band, (x, 0, w, h), check.chromaticities)
     finally:
         image.close()
-    pixels = np.asarray(pixels).reshape(*np.shape(pixels)[:2], len(names))
-    # Greyscale: Y as equal R, G, B (whose luminance is Y whatever the primaries).
-    rgb = pixels[..., [names.index(c) for c in ("YYY" if grey else "RGB")]]
-    layer = [names.index(n) for n in names if n.startswith("uncertainty.")]
-    chromaticities = tuple(header.get("chromaticities", REC709_D65))
-    clipped = header.get("hdrio:clippedFraction")
-    report = check_pixels(rgb, chromaticities, units=str(header.get("hdrio:units", "unknown")),
-                          clipped_fraction=None if clipped is None else float(clipped),
-                          gamut=gamut, chart=chart)
-    report.source = str(path)
-    if layer:
-        report.uncertainty = uncertainty_summary(pixels[..., layer])
+    report = check.report(str(path))
+    report.delta_E = delta_E
+    if samples:
+        report.uncertainty = uncertainty_summary(np.concatenate(
+            [band.reshape(-1) for band in samples]))
     if grey:
         report.notes.append("greyscale (Y): luminance checks only, no colour")
     elif "chromaticities" not in header:

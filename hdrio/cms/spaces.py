@@ -255,3 +255,20 @@ def derived_chromaticities(name: str, config: str | os.PathLike[str] | None = No
     xyz = np.column_stack([to_xyz, to_xyz.sum(axis=1)]).T  # R, G, B, white
     xy = xyz[:, :2] / xyz.sum(axis=1, keepdims=True)
     return tuple(float(v) for v in xy.reshape(-1))
+
+
+def display_view_names(display: str, view: str | None = None,
+                       config: str | os.PathLike[str] | None = None) -> tuple[str, str]:
+    """``(display, view)`` checked against the config (``view`` ``None``: the display's
+    default); raises :class:`HdrioError` listing the choices."""
+    loaded = load_config(config)
+    displays = list(loaded.getDisplays())
+    if display not in displays:
+        raise HdrioError(f"{config_source(config)}: no display {display!r}; choose from "
+                         f"{', '.join(displays)}")
+    views = list(loaded.getViews(display))
+    view = view or loaded.getDefaultView(display)
+    if view not in views:
+        raise HdrioError(f"display {display!r} has no view {view!r}; choose from "
+                         f"{', '.join(views)}")
+    return display, view

@@ -17,6 +17,7 @@ from hdrio.cms import spaces
 from hdrio.cms.calibration import Calibration, Region, absolute_scale
 from hdrio.cms.encoding import Encoding, resolve_encoding
 from hdrio.cms.whitebalance import apply_gains, neutral_gains
+from hdrio.errors import HdrioError
 from hdrio.io.write import Float2
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
@@ -92,18 +93,11 @@ def colour_attributes(state: ColourState, output_space: str, config: str | None 
 
     ``exposure_scale`` is the factor applied to pixels before writing (half range).
     """
-    chromaticities = spaces.chromaticities(output_space, config)
     attributes: dict[str, object] = {
-        "chromaticities": chromaticities,
-        "adoptedNeutral": Float2(chromaticities[6], chromaticities[7]),
-        "hdrio:colorSpace": spaces.canonical_space(output_space, config),
-        "hdrio:ocioConfig": spaces.config_label(config),
+        **space_attributes(output_space, config),
         "hdrio:inputEncoding": f"{state.encoding.name} ({state.encoding_source})",
         "hdrio:whiteBalance": "camera",
     }
-    interop = spaces.interop_id(output_space, config)
-    if interop:
-        attributes["colorInteropID"] = interop
     if state.gains is not None and state.white_balance is not None:
         region = ",".join(str(v) for v in state.white_balance)
         gains = " ".join(f"{g:.6g}" for g in state.gains)
@@ -115,3 +109,57 @@ def colour_attributes(state: ColourState, output_space: str, config: str | None 
         attributes["hdrio:luminanceScale"] = float(state.luminance_scale)
         attributes["hdrio:calibration"] = state.calibration.describe()
     return attributes
+
+
+def space_attributes(space: str, config: str | None = None) -> dict[str, object]:
+    """What says the pixels are scene-linear ``space``: ``chromaticities``,
+    ``adoptedNeutral``, ``colorInteropID`` (when the space has one), ``hdrio:colorSpace``
+    and ``hdrio:ocioConfig``.
+
+    The one ``adoptedNeutral`` rule: the white of the space's own chromaticities (the
+    ACES white for ACEScg and ACES2065-1, D65 for Rec.709), wherever the file is written.
+    """
+    chromaticities = spaces.chromaticities(space, config)
+    attributes: dict[str, object] = {
+        "chromaticities": chromaticities,
+        "adoptedNeutral": Float2(chromaticities[6], chromaticities[7]),
+        "hdrio:colorSpace": spaces.canonical_space(space, config),
+        "hdrio:ocioConfig": spaces.config_label(config),
+    }
+    interop = spaces.interop_id(space, config)
+    if interop:
+        attributes["colorInteropID"] = interop
+    return attributes
+
+
+# Attributes that describe scene-linear radiance, untrue of a tone-mapped image.
+_SCENE_LINEAR_ONLY = ("whiteLuminance", "hdrio:exposureScale", "hdrio:luminanceScale",
+                      "hdrio:calibration", "colorInteropID", "adoptedNeutral")
+
+
+def display_attributes(attributes: Mapping[str, object], rendering: str,
+                       display: str | None = None, config: str | None = None
+                       ) -> dict[str, object]:
+    """``attributes`` of a scene-linear image, relabelled for its display rendering.
+
+    ``hdrio:units`` becomes ``display-referred``, ``hdrio:colorSpace`` the display
+    (sRGB for the Reinhard operators), ``hdrio:rendering`` says how (``rendering``);
+    ``chromaticities`` become the display's primaries (Rec.709 / D65 when unknown) and
+    what only holds for radiance (exposure scale, absolute luminance) is dropped.
+    Provenance (sources, response, settings) is kept.
+    """
+    from hdrio.cms.checks import REC709_D65
+
+    relabelled = {name: value for name, value in attributes.items()
+                  if name not in _SCENE_LINEAR_ONLY}
+    chromaticities: tuple[float, ...] = REC709_D65
+    name = "sRGB - Display"
+    if display is not None:
+        name = display
+        try:
+            chromaticities = spaces.chromaticities(display, config)
+        except (HdrioError, KeyError):  # no matrix to the reference: Rec.709
+            chromaticities = REC709_D65
+    relabelled.update({"hdrio:units": "display-referred", "hdrio:colorSpace": name,
+                       "hdrio:rendering": rendering, "chromaticities": chromaticities})
+    return relabelled

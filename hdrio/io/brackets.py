@@ -127,6 +127,8 @@ def _exif_of(spec) -> dict:
         "ISO": spec.getattribute("Exif:PhotographicSensitivity")
         or spec.getattribute("Exif:ISOSpeedRatings"),
         "DateTimeOriginal": spec.getattribute("Exif:DateTimeOriginal"),
+        "Make": spec.getattribute("Make"),
+        "Model": spec.getattribute("Model"),
         # The input encoding (hdrio.cms.encoding): ICC description, EXIF ColorSpace.
         "ICCDescription": spec.getattribute("ICCProfile:profile_description"),
         "ExifColorSpace": spec.getattribute("Exif:ColorSpace"),

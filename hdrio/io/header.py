@@ -38,3 +38,20 @@ def read_header(path: str | Path) -> dict[str, object]:
         finally:
             image.close()
     return header
+
+
+def read_typed_attributes(path: str | Path) -> dict[str, object]:
+    """Every attribute of ``path`` as a :class:`~hdrio.io.write.Typed` (its OpenImageIO
+    type kept), so that writing it again stores the same type (GPS vectors, rationals)."""
+    import OpenImageIO as oiio
+
+    from hdrio.io.write import Typed
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(path, f"cannot read header ({oiio.geterror().strip()})")
+    try:
+        return {attribute.name: Typed(str(attribute.type), attribute.value)
+                for attribute in image.spec().extra_attribs}
+    finally:
+        image.close()

@@ -97,10 +97,20 @@ def check_not_an_input(path: str | Path, inputs: Iterable[str | Path]) -> None:
                               "another name")
 
 
+def _nearest_existing(folder: Path) -> Path:
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
 def check_output(path: str | Path, inputs: Iterable[str | Path] = (),
                  suffixes: Iterable[str] | None = None, writable: bool = True) -> Path:
     """Check an output name before any work; ``suffixes`` (lower case, with the dot)
-    limits its type. ``writable``: also create and remove a temp file beside it."""
+    limits its type. ``writable``: also create and remove a temp file beside it.
+
+    A missing folder is made when the output is written (:func:`make_folder_for`): then
+    the nearest existing folder above it must be a folder that takes new entries.
+    """
     path = Path(path)
     too_long = name_too_long(path)
     if too_long:
@@ -111,11 +121,28 @@ def check_output(path: str | Path, inputs: Iterable[str | Path] = (),
         allowed = sorted(set(suffixes))
         if path.suffix.lower() not in allowed:
             raise OutputError(f"{path}: unsupported output type; use {', '.join(allowed)}")
-    if not path.parent.is_dir():
-        raise OutputError(f"{path}: folder {path.parent} does not exist")
     check_not_an_input(path, inputs)
+    if not path.parent.is_dir():
+        existing = _nearest_existing(path.parent.absolute())
+        if not existing.is_dir():
+            raise OutputError(f"{path}: {existing} is a file, not a folder")
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise OutputError(f"{path}: cannot make folder {path.parent} in {existing} "
+                              "(permission denied)")
+        return path
     if writable:
         check_writable(path)
+    return path
+
+
+def make_folder_for(path: str | Path) -> Path:
+    """Make ``path``'s folder (and those above it) if missing; returns ``path``."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise OutputError(f"{path}: cannot make folder {path.parent} "
+                          f"({_problem(error)})") from None
     return path
 
 

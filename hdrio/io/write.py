@@ -27,6 +27,15 @@ _AGGREGATE_LENGTHS = (2, 3, 9, 16)
 
 
 @dataclass(frozen=True)
+class Typed:
+    """An attribute value with its OpenImageIO type name (``"float[3]"``, ``"rational2i"``),
+    as read from another file: written back with the same type."""
+
+    type: str
+    value: object
+
+
+@dataclass(frozen=True)
 class Float2:
     """Two floats stored as an EXR ``v2f`` vector (e.g. ``adoptedNeutral``), not a list."""
 
@@ -38,6 +47,8 @@ def _type_of(value) -> tuple[str, object]:
     """The OpenImageIO type name and value for an attribute (scalars, strings, arrays)."""
     if isinstance(value, Float2):
         return "float2", (float(value.x), float(value.y))
+    if isinstance(value, Typed):
+        return value.type, value.value
     if isinstance(value, bool):
         return "int", int(value)
     if isinstance(value, int | np.integer):
@@ -200,13 +211,15 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
 
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
               pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
-              layers: Mapping[str, np.ndarray] | None = None) -> Path:
+              layers: Mapping[str, np.ndarray] | None = None,
+              observe: Callable[[np.ndarray], None] | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
     range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
-    :func:`hdrio.pipeline.half_safe_scale`).
+    :func:`hdrio.pipeline.half_safe_scale`). ``observe(rows)``, when given, sees each
+    band of the image's own channels exactly as stored (half bands as ``float16``).
 
     ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
     channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the
@@ -230,7 +243,9 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         if factor != 1:
             rows[..., :own] *= factor
         if pixel_type == "half":
-            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX)
+            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX).astype(np.float16)
+        if observe is not None:
+            observe(rows[..., :own])
         return rows
 
     attributes = {"compression": compression, **(attributes or {})}

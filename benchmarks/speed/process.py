@@ -1,0 +1,136 @@
+"""The commands a user types, timed as processes: wall time and peak RSS from the OS.
+
+Each row runs one command in a fresh process under ``/usr/bin/time -f '%e %M'`` (wall
+seconds, peak resident KB of that process, as the kernel counts it), so start-up,
+imports, the kernel cache load and everything the command does around its core are in.
+The I/O floor is a process too: a plain OpenImageIO script that decodes the same JPEGs
+and writes one half ZIP EXR of the same size, timed in the same run.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from benchmarks.speed.endtoend import write_jpegs
+from benchmarks.speed.scene import bracket_stack
+
+_TIME = "/usr/bin/time"
+_FLOOR = """
+import sys
+import numpy as np
+import OpenImageIO as oiio
+*paths, output = sys.argv[1:]
+for path in paths:
+    image = oiio.ImageInput.open(path)
+    codes = image.read_image(0, 0, 0, 3, "uint8")
+    image.close()
+pixels = (codes.astype(np.float32) / 255.0).astype(np.float16)
+spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, "half")
+spec.attribute("compression", "zip")
+out = oiio.ImageOutput.create(output)
+out.open(output, spec)
+out.write_image(pixels)
+out.close()
+"""
+
+
+def hdrio_command() -> list[str]:
+    """``hdrio`` as installed beside this interpreter (the console script users type)."""
+    script = Path(sys.executable).parent / "hdrio"
+    return [str(script)] if script.exists() else [sys.executable, "-m", "hdrio"]
+
+
+def timed(argv: list[str], env: dict[str, str] | None = None) -> dict:
+    """Run ``argv`` once; ``{"seconds", "peak_mb"}`` from ``/usr/bin/time``.
+
+    ``/usr/bin/time`` is a small process, so the peak is the command's own (a child of
+    this big Python would inherit its high-water mark through fork and exec).
+    """
+    if not Path(_TIME).exists():
+        raise RuntimeError(f"{_TIME} not found (apt-get install time)")
+    completed = subprocess.run([_TIME, "-f", "%e %M", *argv], capture_output=True,
+                               text=True, env={**os.environ, **(env or {})})
+    if completed.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv[:3])}... failed: {completed.stderr[-500:]}")
+    seconds, peak_kb = completed.stderr.strip().splitlines()[-1].split()
+    return {"seconds": float(seconds), "peak_mb": int(peak_kb) / 1024}
+
+
+def _median(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> dict:
+    runs = [timed(argv, env) for _ in range(repeats)]
+    return {"seconds": statistics.median(r["seconds"] for r in runs),
+            "peak_mb": max(r["peak_mb"] for r in runs)}
+
+
+def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 9)
+        ) -> list[dict]:
+    """Rows for ``hdrio merge`` (5, 7, 9 JPEG brackets -> half EXR), the I/O floor of
+    each, ``hdrio check`` of the 7-bracket EXR, and ``hdrio demo`` cold and warm."""
+    hdrio = hdrio_command()
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory(prefix="hdrio-process-") as folder:
+        folder = Path(folder)
+        ladder, _ = bracket_stack(height, width, count=max(counts))
+        paths = [str(p) for p in write_jpegs(ladder, folder)]
+        exposures = [repr(float(t)) for t in ladder.exposures]
+        ladder = None
+        for count in counts:
+            first = (len(paths) - count) // 2
+            chosen = slice(first, first + count)
+            output = folder / f"merge{count}.exr"
+            floor = _median([sys.executable, "-c", _FLOOR, *paths[chosen],
+                             str(folder / "floor.exr")], repeats)
+            merge = _median([*hdrio, "merge", *paths[chosen], "--exposures",
+                             ",".join(exposures[chosen]), "-o", str(output), "-q"], repeats)
+            rows.append({"row": "process", "method": f"I/O floor process, {count} JPEGs "
+                         "(decode + write half EXR)", "seconds": floor["seconds"],
+                         "process_peak_mb": floor["peak_mb"], "floor_of": count})
+            rows.append({"row": "process", "method": f"hdrio merge, {count} JPEGs -> half "
+                         "EXR", "seconds": merge["seconds"], "process_peak_mb": merge["peak_mb"],
+                         "merge_of": count})
+        check = _median([*hdrio, "check", str(folder / "merge7.exr")], repeats)
+        rows.append({"row": "process", "method": f"hdrio check of the {width}x{height} half "
+                     "EXR", "seconds": check["seconds"], "process_peak_mb": check["peak_mb"],
+                     "check": True})
+        rows += demo_rows(hdrio, folder)
+    return rows
+
+
+def demo_rows(hdrio: list[str], folder: Path) -> list[dict]:
+    """``hdrio demo`` with an empty kernel cache (first run after install), then warm."""
+    cache = folder / "numba-cache"
+    cache.mkdir()
+    env = {"NUMBA_CACHE_DIR": str(cache)}
+    cold = timed([*hdrio, "demo", "-o", str(folder / "demo"), "-q"], env)
+    shutil.rmtree(folder / "demo")
+    warm = timed([*hdrio, "demo", "-o", str(folder / "demo"), "-q"], env)
+    return [{"row": "process", "method": "hdrio demo, empty kernel cache (first run)",
+             "seconds": cold["seconds"], "process_peak_mb": cold["peak_mb"], "demo": "cold"},
+            {"row": "process", "method": "hdrio demo, cache filled (every later run)",
+             "seconds": warm["seconds"], "process_peak_mb": warm["peak_mb"], "demo": "warm"}]
+
+
+def ratios(rows: list[dict]) -> dict[str, float | None]:
+    """Acceptance ratios of issue #16, each from rows of this run."""
+    def pick(key: str, value: object) -> dict | None:
+        return next((row for row in rows if row.get(key) == value), None)
+
+    result: dict[str, float | None] = {}
+    merge7, floor7 = pick("merge_of", 7), pick("floor_of", 7)
+    if merge7 and floor7:
+        result["process: hdrio merge 7 JPEGs / I/O floor process"] = (
+            merge7["seconds"] / floor7["seconds"])
+    peaks = [row["process_peak_mb"] for row in rows if "merge_of" in row]
+    if len(peaks) > 1:
+        result["process: peak MB, largest / smallest over 5..9 brackets"] = (
+            max(peaks) / min(peaks))
+    cold, warm = pick("demo", "cold"), pick("demo", "warm")
+    if cold and warm:
+        result["process: hdrio demo, empty cache / warm"] = cold["seconds"] / warm["seconds"]
+    return result

@@ -1,0 +1,124 @@
+"""Files tell the truth: metadata carried through the chain, display-referred labels,
+capture time and camera from EXIF, one adoptedNeutral rule, short exposure decimals."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import OpenImageIO as oiio
+import pytest
+
+from hdrio.cms.checks import REC709_D65
+from tests.conftest import DEFAULT_EXPOSURES
+from tests.conftest import run_cli as run
+
+
+def _header(path: Path) -> dict:
+    with OpenEXR.File(str(path)) as file:
+        return dict(file.header())
+
+
+def _channels(path: Path) -> dict[str, np.ndarray]:
+    image = oiio.ImageInput.open(str(path))
+    spec = image.spec()
+    pixels = image.read_image("float")
+    image.close()
+    return {name: pixels[..., c] for c, name in enumerate(spec.channelnames)}
+
+
+@pytest.fixture
+def foreign_rgba(tmp_path: Path) -> Path:
+    """An RGBA half EXR written by another program, with Copyright, capDate and GPS."""
+    path = tmp_path / "foreign.exr"
+    spec = oiio.ImageSpec(8, 6, 4, "half")
+    spec.attribute("Copyright", "(c) A. Photographer")
+    spec.attribute("DateTime", "2019:05:04 10:11:12")  # EXR capDate
+    spec.attribute("GPS:Latitude", oiio.TypeDesc("float[3]"), (51.0, 30.0, 12.5))
+    spec.attribute("GPS:LatitudeRef", "N")
+    spec.attribute("ExposureTime", 0.01)
+    spec.attribute("screenWindowWidth", 1.5)
+    output = oiio.ImageOutput.create(str(path))
+    output.open(str(path), spec)
+    rng = np.random.default_rng(1)
+    output.write_image(rng.uniform(0.05, 1.0, (6, 8, 4)).astype(np.float16))
+    output.close()
+    return path
+
+
+def test_chain_keeps_alpha_and_source_metadata(foreign_rgba, tmp_path, capsys):
+    out = tmp_path / "out.exr"
+    code, _, err = run(capsys, foreign_rgba, "--exposure", "1", "-o", out)
+    assert code == 0, err
+    before, after = _channels(foreign_rgba), _channels(out)
+    assert list(after) == ["R", "G", "B", "A"]
+    np.testing.assert_array_equal(after["A"], before["A"])  # alpha untouched
+    # x2 is exact in half floats (no value here is near the top of the range).
+    np.testing.assert_array_equal(after["R"], 2 * before["R"])
+    header = _header(out)
+    assert header["owner"] == "(c) A. Photographer"  # OpenEXR's name for Copyright
+    assert header["capDate"] == "2019:05:04 10:11:12"
+    assert tuple(header["GPS:Latitude"]) == (51.0, 30.0, 12.5)
+    assert header["GPS:LatitudeRef"] == "N"
+    assert header["expTime"] == pytest.approx(0.01)
+    assert header["screenWindowWidth"] == 1.5
+    assert header["hdrio:exposureScale"] == 2.0
+
+
+def test_tone_mapped_exr_is_labelled_display_referred(brackets, tmp_path, capsys):
+    out = tmp_path / "display.exr"
+    code, _, err = run(capsys, *brackets, "--colorspace", "ACEScg", "--merge",
+                       "--tonemap", "reinhard-global", "-o", out)
+    assert code == 0, err
+    header = _header(out)
+    assert header["hdrio:units"] == "display-referred"
+    assert header["hdrio:colorSpace"] == "sRGB - Display"
+    assert header["hdrio:rendering"] == "reinhard-global (sRGB)"
+    np.testing.assert_allclose(np.ravel(header["chromaticities"]), REC709_D65, atol=1e-6)
+    for scene_only in ("hdrio:exposureScale", "colorInteropID", "adoptedNeutral"):
+        assert scene_only not in header
+    # Read back, the chain knows it is display-referred.
+    code, _, err = run(capsys, out, "--exposure", "1", "-o", tmp_path / "again.exr")
+    assert code == 2 and "display-referred" in err, err
+
+
+def test_capture_time_camera_and_exposures_from_exif(write_brackets, tmp_path, capsys):
+    times = (0.015625, 0.0625, 0.25, 1.0)  # exact as EXIF rationals
+    files = write_brackets(times, attributes=[
+        {"ExposureTime": t, "Exif:DateTimeOriginal": "2021:07:08 09:10:11", "Make": "Acme",
+         "Model": "HDR-1"} for t in times])
+    out = tmp_path / "out.exr"
+    code, _, err = run(capsys, "merge", *files, "-o", out, "-q")
+    assert code == 0, err
+    header = _header(out)
+    assert header["capDate"] == "2021:07:08 09:10:11"
+    assert (header["Make"], header["Model"]) == ("Acme", "HDR-1")
+    assert list(header["hdrio:exposures"]) == ["0.015625", "0.0625", "0.25", "1"]
+
+
+def test_no_capture_time_is_written_as_none_not_now(brackets, tmp_path, capsys):
+    out = tmp_path / "out.exr"
+    assert run(capsys, "merge", *brackets, "-o", out, "-q")[0] == 0
+    assert "capDate" not in _header(out)
+
+
+def test_one_adopted_neutral_rule(brackets, tmp_path, capsys):
+    """ACEScg from the merge, or converted to in the chain: the ACES white either way."""
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    assert run(capsys, "merge", *brackets, "--colorspace", "ACEScg", "-o", a, "-q")[0] == 0
+    assert run(capsys, *brackets, "--merge", "--colorspace", "ACEScg", "-o", b)[0] == 0
+    white_a, white_b = _header(a)["adoptedNeutral"], _header(b)["adoptedNeutral"]
+    chromaticities = np.ravel(_header(a)["chromaticities"])
+    np.testing.assert_allclose(white_a, chromaticities[6:8], atol=1e-6)
+    np.testing.assert_allclose(white_b, white_a, atol=1e-6)
+    assert abs(white_a[0] - REC709_D65[6]) > 1e-3  # not D65
+
+
+def test_exposure_text_is_short_and_exact():
+    from hdrio.pipeline import exposure_text
+
+    assert exposure_text(np.float32(0.01)) == "0.01"
+    assert exposure_text(1 / 3) == repr(1 / 3)  # a 64-bit time keeps every digit
+    for t in DEFAULT_EXPOSURES:
+        assert float(exposure_text(t)) == t
