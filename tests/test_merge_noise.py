@@ -204,7 +204,11 @@ def stress():
 def test_noise_aware_estimators_never_fail(step, count, bits, scene, method):
     # Exposure ratios 2^-20..2^20 between neighbours, 2..20 brackets, 8..16 bits, flat and
     # all-clipped or all-black scenes: the fit and the merge never raise, every value is
-    # finite and positive, and a brighter pixel never merges darker (monotone).
+    # finite and positive, and a brighter pixel never merges darker (monotone) wherever
+    # neighbouring brackets overlap (steps up to 6 stops). With wider gaps a pixel can be
+    # left with one code of one bracket (code 1 of the shorter of two brackets 17 stops
+    # apart, once the longer saturates), whose quantisation step is wider than the gap:
+    # its estimate can fall below the last unsaturated value of its brighter neighbour.
     exposures = 2.0 ** (step * np.arange(count))
     exposures = exposures / exposures.max()
     code_max = 2**bits - 1
@@ -222,7 +226,7 @@ def test_noise_aware_estimators_never_fail(step, count, bits, scene, method):
     assert np.all(np.isfinite(noise.shot)) and np.all(noise.read >= 0)
     radiance_out, _ = MERGE_METHODS[method](stack, response, noise=noise)
     assert np.all(np.isfinite(radiance_out)) and np.all(radiance_out > 0)
-    if scene == "ramp":
+    if scene == "ramp" and abs(step) <= 6:
         row = radiance_out[0, :, 0]
         assert np.all(np.diff(row) >= -1e-6 * row[1:])
 

@@ -87,9 +87,9 @@ def run_merge(args: argparse.Namespace) -> int:
     settings = settings_from_namespace(args)
     options = merge_options(settings)
     display_view = display_view_from(args, options.ocio_config)
-    for path in args.images:
-        if not Path(path).is_file():
-            raise HdrioError(f"{path}: no such file")
+    from hdrio.io.paths import check_inputs
+
+    check_inputs(args.images)
     for path in (output, preview):
         if path is not None:
             make_parent(path)
