@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
+from hdrio.align.stage import Motion, align_step, check_modes, masked_merge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
@@ -63,6 +64,9 @@ class MergeOptions:
     response_from: str | None = None
     # Names in hdrio.skips.SKIPS turned off (all on by default).
     no_skip: tuple[str, ...] = ()
+    # Registration and deghosting (hdrio.align): docs/motion.md.
+    align: str = "auto"  # auto | off | translation | euclidean | homography
+    deghost: str = "auto"  # auto | off
 
     @property
     def skips(self) -> frozenset[str]:
@@ -81,6 +85,7 @@ class MergeResult:
     exposure_scale: float = 1.0
     colour: ColourState | None = None
     skipped: SkipReport = field(default_factory=SkipReport)
+    motion: Motion = field(default_factory=Motion)
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -101,30 +106,47 @@ def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.nda
 
 def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                 progress: Progress | None = None,
-                response: CameraResponse | None = None) -> MergeResult:
-    """Recover the response and merge ``stack`` (no file I/O).
+                response: CameraResponse | None = None, owned: bool = False) -> MergeResult:
+    """Recover the response, align and merge ``stack`` (no file I/O).
 
     ``response``, when given (e.g. read back with :func:`hdrio.response.stored.read_response`),
     is used instead of a solve; camera RAW stacks use the linear response. The skips in
     ``options.skips`` apply (:mod:`hdrio.skips`); ``result.skipped`` says which did.
+    ``owned``: the caller hands the stack over (its codes may be warped in place, so
+    alignment needs no second copy of the brackets); otherwise ``stack`` is left as is.
     """
     say = progress or (lambda message: None)
+    check_modes(options.align, options.deghost)
     skips = options.skips
     skipped = SkipReport(dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
+    solve = None
     if response is None:
         method = "linear" if is_raw_stack(stack) else options.response
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
-        response = RESPONSE_METHODS[method](
-            stack, smoothing=options.smoothing, weighting=options.weighting,
-            sampling=options.sampling, samples=options.samples,
-            exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
-            **({"solve_identical_once": "channels" in skips} if method != "linear" else {}),
-        )
+
+        def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+            return RESPONSE_METHODS[method](
+                stack, smoothing=options.smoothing, weighting=options.weighting,
+                sampling=options.sampling, samples=options.samples, exclude=exclude,
+                seed=options.seed,
+                **({"solve_identical_once": "channels" in skips} if method != "linear"
+                   else {}))
+
+        response = solve(stack, exclusion_mask(stack, options.exclude_colour))
         skipped.channels_solved = response.parameters.get("channels_solved")
     timings["response"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if options.align != "off":
+        say(f"aligning {stack.count} brackets ({options.align})")
+    stack, response, motion = align_step(
+        stack, response, options.align,
+        solve if options.exclude_colour is None else None, in_place=owned)
+    if motion.alignment is not None and not motion.warped:
+        skipped.warp = True
+    timings["align"] = time.perf_counter() - start
     start = time.perf_counter()
     merged = stack
     kinds = stack.kinds
@@ -145,15 +167,23 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         early_stop="early-stop" in skips)
     skipped.early_stop_fraction = statistics.observations_skipped / (
         statistics.pixels * merged.count)
+    timings["merge"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if options.deghost != "off":
+        say("deghosting")
+    masked_merge_step(merged, response, radiance, motion, options.deghost, options.weighting,
+                      MERGE_METHODS.canonical(options.merge), options.saturation == "channel")
+    timings["deghost"] = time.perf_counter() - start
+    start = time.perf_counter()
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
-    timings["merge"] = time.perf_counter() - start
+    timings["merge"] += time.perf_counter() - start
     radiance, colour = colour_stage(
         stack, response, radiance, input_encoding=options.input_encoding,
         white_balance=options.white_balance, calibration=options.calibration)
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
-                       skipped=skipped)
+                       skipped=skipped, motion=motion)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -196,6 +226,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     skipped = result.skipped.lines(stack.shape[2])
     if skipped:
         attributes["hdrio:skipped"] = "; ".join(skipped)
+    attributes.update(motion_attributes(result))
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
     if result.colour is not None:
@@ -208,6 +239,26 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         codes = np.flatnonzero(response.supported[:, c])
         supported.append(f"{name} {codes[0]}-{codes[-1]}" if codes.size else f"{name} none")
     attributes["hdrio:responseSupport"] = ", ".join(supported)
+    return attributes
+
+
+def motion_attributes(result: MergeResult) -> dict[str, object]:
+    """``hdrio:align*`` and ``hdrio:deghost*``: the modes, each bracket's warp (text: the
+    3x3 matrix, reference pixels to bracket pixels), the deghosted fraction."""
+    options, motion = result.options, result.motion
+    attributes: dict[str, object] = {"hdrio:align": options.align,
+                                     "hdrio:deghost": options.deghost}
+    if motion.alignment is not None:
+        alignment = motion.alignment
+        attributes["hdrio:alignModel"] = alignment.model
+        attributes["hdrio:alignReference"] = str(result.stack.files[alignment.reference])
+        attributes["hdrio:alignWarped"] = int(motion.warped)
+        attributes["hdrio:alignTransforms"] = [
+            " ".join(f"{v:.6g}" for v in warp.reshape(-1)[:8])
+            for warp in alignment.transforms]
+        attributes["hdrio:alignUncovered"] = float(motion.uncovered)
+    if motion.deghosting is not None:
+        attributes["hdrio:deghostedFraction"] = float(motion.deghosting.fraction)
     return attributes
 
 
@@ -254,7 +305,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                           stop_when_covered=response is not None
                           and "covered" in options.skips)
     read_time = time.perf_counter() - start
-    result = merge_stack(stack, options, progress, response)
+    result = merge_stack(stack, options, progress, response, owned=True)
     if response is not None:
         result.skipped.response_from = str(options.response_from)
     result.timings["read"] = read_time

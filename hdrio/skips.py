@@ -95,6 +95,8 @@ class SkipReport:
     """Distinct channels solved (fewer than the channels when some were identical)."""
     early_stop_fraction: float = 0.0
     """Fraction of pixel-brackets the merge kernel never read."""
+    warp: bool = False
+    """``--align auto`` measured every bracket within 0.1 px and did not resample."""
 
     def lines(self, channels: int) -> list[str]:
         said = []
@@ -107,6 +109,8 @@ class SkipReport:
         if self.channels_solved is not None and self.channels_solved < channels:
             said.append(f"{channels - self.channels_solved} of {channels} channel solves "
                         "(identical channels)")
+        if self.warp:
+            said.append("alignment warp (every bracket within 0.1 px of the reference)")
         if self.early_stop_fraction > 0:
             said.append(f"{100 * self.early_stop_fraction:.1f} % of the merge "
                         "(rows saturated in a shorter bracket)")

@@ -29,6 +29,7 @@ from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.merge.debevec1997 import estimate_tables
 from hdrio.response.curve import CameraResponse
+from hdrio.skips import well_exposed_codes
 from hdrio.stack import ExposureStack
 
 ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")
@@ -86,11 +87,20 @@ class Alignment:
         return lines
 
 
-def reference_bracket(bases: list[BaseImage]) -> int:
-    """The best-exposed bracket (most blocks well exposed); the middle one on a tie."""
-    middle = (len(bases) - 1) / 2.0
-    scores = [(int(np.count_nonzero(b.valid)), -abs(j - middle)) for j, b in enumerate(bases)]
-    return max(range(len(bases)), key=lambda j: scores[j])
+def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536) -> int:
+    """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
+    channel well exposed (:data:`hdrio.skips.WELL_EXPOSED`, on a grid of about
+    ``samples`` pixels); the one nearest the middle on a tie."""
+    count, height, width, _ = codes.shape
+    step = max(1, int(math.sqrt(height * width / samples)))
+    low, high = well_exposed_codes(code_max)
+    middle = (count - 1) / 2.0
+    scores = []
+    for j in range(count):
+        grid = codes[j, step // 2::step, step // 2::step]
+        good = np.all((grid >= low) & (grid <= high), axis=-1)
+        scores.append((int(np.count_nonzero(good)), -abs(j - middle)))
+    return max(range(count), key=lambda j: scores[j])
 
 
 def _pyramid(base: BaseImage, levels: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -125,7 +135,8 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
     linear = linear_tables(response, stack.exposures)
     bases = [base_image(stack.codes[j], linear[j], stack.code_max, factor)
              for j in range(count)]
-    reference = reference_bracket(bases) if start is None else start.reference
+    reference = (reference_bracket(stack.codes, stack.code_max) if start is None
+                 else start.reference)
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape)) if start is None else 0
     ref_pyramid = _pyramid(bases[reference], levels)
     pyramids = {reference: _pyramid(bases[reference], levels)}

@@ -1,0 +1,97 @@
+"""The merge's alignment and deghosting steps, as :func:`hdrio.pipeline.merge_stack` runs
+them (``--align``, ``--deghost``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hdrio.align.deghost import CELL, Deghosting, _interim_variance, deghost
+from hdrio.align.registration import (ALIGN_MODES, Alignment, align_stack, linear_tables,
+                                      reference_bracket, register)
+from hdrio.align.warp import coverage
+from hdrio.merge.debevec1997 import merge_tables
+from hdrio.merge.masked import remerge_masked
+from hdrio.response.curve import CameraResponse
+from hdrio.stack import ExposureStack
+
+DEGHOST_MODES = ("auto", "off")
+
+
+@dataclass
+class Motion:
+    """What alignment and deghosting did, for the summary and the header.
+
+    Attributes
+    ----------
+    alignment
+        The measured warps (``None`` with ``--align off``).
+    warped
+        Whether the brackets were resampled (``auto`` skips it when every bracket is
+        within :data:`hdrio.align.registration.WITHIN` pixels).
+    deghosting
+        Keep weights and the fraction deghosted (``None`` with ``--deghost off``).
+    uncovered
+        Fraction of pixels some warped bracket does not cover (dropped there).
+    """
+
+    alignment: Alignment | None = None
+    warped: bool = False
+    deghosting: Deghosting | None = None
+    uncovered: float = 0.0
+
+
+def check_modes(align: str, deghost_mode: str) -> None:
+    """Raise ``ValueError`` naming the option when a mode is unknown."""
+    if align not in ALIGN_MODES:
+        raise ValueError(f"--align must be one of {', '.join(ALIGN_MODES)}, not {align!r}")
+    if deghost_mode not in DEGHOST_MODES:
+        raise ValueError(f"--deghost must be one of {', '.join(DEGHOST_MODES)}, "
+                         f"not {deghost_mode!r}")
+
+
+def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
+               solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None,
+               in_place: bool = False) -> tuple[ExposureStack, CameraResponse, Motion]:
+    """Measure and (unless ``auto`` finds nothing moved) warp; ``solve`` re-solves the
+    response on the aligned brackets (``None``: keep ``response``, e.g. a saved one)."""
+    motion = Motion()
+    if mode == "off" or stack.count < 2:
+        return stack, response, motion
+    model = "euclidean" if mode == "auto" else mode
+    motion.alignment, response = register(stack, response, model, solve)
+    if mode != "auto" or motion.alignment.moved:
+        stack = align_stack(stack, motion.alignment, in_place=in_place)
+        motion.warped = True
+    return stack, response, motion
+
+
+def masked_merge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
+                      motion: Motion, deghost_mode: str, weighting: str, domain: str,
+                      per_channel: bool) -> None:
+    """Drop inconsistent observations (``deghost_mode`` ``auto``) and uncovered borders
+    from the merge: re-merges those pixels of ``radiance`` in place
+    (:func:`hdrio.merge.masked.remerge_masked`)."""
+    if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
+        return
+    count, height, width, _ = stack.codes.shape
+    reference = (motion.alignment.reference if motion.alignment is not None
+                 else reference_bracket(stack.codes, stack.code_max))
+    cells = None
+    if motion.warped:
+        cells = np.stack([coverage(motion.alignment.transforms[j], height, width, CELL)
+                          for j in range(count)])
+        cells[reference] = 1.0
+        motion.uncovered = float(np.mean(cells.min(axis=0) < 1))
+    if deghost_mode == "auto":
+        motion.deghosting = deghost(
+            stack.codes, linear_tables(response, stack.exposures),
+            _interim_variance(response, stack.exposures), reference, cells)
+        keep = motion.deghosting.keep
+    else:
+        keep = cells
+    terms, estimates = merge_tables(response, stack.exposures, weighting, domain)
+    remerge_masked(stack.codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
+                   domain == "log", radiance)
