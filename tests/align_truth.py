@@ -1,7 +1,7 @@
 """Ground truth for alignment and deghosting: a real EXR scene seen by a moving camera.
 
 The scene is cropped at twice the stack's resolution, each bracket's view warped there
-(bilinear on radiance, then a 2x2 area average: what a sensor pixel integrates), and
+(a cubic spline on radiance, then a 2x2 area average: what a sensor pixel integrates), and
 rendered through a measured camera response (DoRF) with the truth harness's noise.
 The reference bracket sees the scene unwarped, so the still stack's truth is the crop.
 """
@@ -47,8 +47,9 @@ def view(crop: np.ndarray, warp: np.ndarray, objects=()) -> np.ndarray:
         w = inverse[2, 0] * x + inverse[2, 1] * y + inverse[2, 2]
         sx = (inverse[0, 0] * x + inverse[0, 1] * y + inverse[0, 2]) / w
         sy = (inverse[1, 0] * x + inverse[1, 1] * y + inverse[1, 2]) / w
-        hi = np.stack([scipy.ndimage.map_coordinates(crop[..., c], [sy, sx], order=1,
+        hi = np.stack([scipy.ndimage.map_coordinates(crop[..., c], [sy, sx], order=3,
                                                      mode="nearest") for c in range(3)], -1)
+        hi = np.maximum(hi, 0.0)  # the spline's ringing below dark edges
     h, w = hi.shape[0] // SUPER, hi.shape[1] // SUPER
     out = hi.reshape(h, SUPER, w, SUPER, 3).mean(axis=(1, 3))
     for top, left, oh, ow, rgb in objects:

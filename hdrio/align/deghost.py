@@ -48,22 +48,52 @@ MIN_SAMPLES = 8
 """Cells with fewer usable samples of a bracket are not judged (kept)."""
 
 
+@njit(cache=True, nogil=True)
+def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - compiled
+    """Smallest and largest usable estimate of bracket ``j`` around ``(y, x)`` (3x3)."""
+    height, width = codes.shape[1], codes.shape[2]
+    low = np.inf
+    high = -np.inf
+    for yy in range(max(0, y - 1), min(height, y + 2)):
+        for xx in range(max(0, x - 1), min(width, x + 2)):
+            z = codes[j, yy, xx, c]
+            if np.isfinite(variance[j, c, z]):
+                e = estimates[j, c, z]
+                low = min(low, e)
+                high = max(high, e)
+    return low, high
+
+
 @njit(parallel=True, cache=True, nogil=True)
 def _consistency(codes, estimates, variance, reference, cell, stride, cap, sums,
                  counts):  # pragma: no cover - compiled
+    """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
+
+    ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
+    3x3 neighbourhood (0 inside it): a resampled bracket differs from the reference at
+    sharp edges by a fraction of a pixel's blur, which is not motion."""
     count, height, width, channels = codes.shape
     rows, cols = sums.shape[1], sums.shape[2]
     for cy in prange(rows):
-        chain = np.empty(channels)
+        start_low = np.empty(channels)
+        start_high = np.empty(channels)
+        start_var = np.empty(channels)
+        low = np.empty(channels)
+        high = np.empty(channels)
         chain_var = np.empty(channels)
         for cx in range(cols):
             for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
+                    for c in range(channels):
+                        z = codes[reference, y, x, c]
+                        start_var[c] = variance[reference, c, z]
+                        if np.isfinite(start_var[c]):
+                            start_low[c], start_high[c] = _local_range(
+                                codes, estimates, variance, reference, y, x, c)
                     for direction in (-1, 1):
-                        for c in range(channels):
-                            z = codes[reference, y, x, c]
-                            chain[c] = estimates[reference, c, z]
-                            chain_var[c] = variance[reference, c, z]
+                        low[:] = start_low
+                        high[:] = start_high
+                        chain_var[:] = start_var
                         j = reference + direction
                         while 0 <= j < count:
                             total = 0.0
@@ -75,11 +105,12 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, sums,
                                     continue  # clipped or black here: says nothing
                                 e = estimates[j, c, z]
                                 if np.isfinite(chain_var[c]):
-                                    d = e - chain[c]
+                                    d = max(0.0, e - high[c], low[c] - e)
                                     total += min(d * d / (v + chain_var[c]), cap)
                                     used += 1
                                 else:  # the reference is clipped or black: j takes over
-                                    chain[c] = e
+                                    low[c], high[c] = _local_range(codes, estimates,
+                                                                   variance, j, y, x, c)
                                     chain_var[c] = v
                             sums[j, cy, cx] += total
                             counts[j, cy, cx] += used

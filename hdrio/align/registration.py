@@ -184,11 +184,20 @@ def align_stack(stack: ExposureStack, alignment: Alignment,
     return replace(stack, codes=codes)
 
 
+EDGE_CODES = 24.0
+"""Pixels whose 3x3 neighbourhood spans more than this (8-bit codes, mean of channels)
+in some bracket are not sampled for the re-solve: resampled brackets differ from the
+reference at sharp edges, and such samples bent the solved response (merged median
+error 0.018-0.024 on the truth stacks; 0.013-0.015 without them; the still stack's
+0.012)."""
+
+
 def sampled_stack(stack: ExposureStack, alignment: Alignment, step: int
                   ) -> tuple[ExposureStack, np.ndarray]:
     """Every ``step``-th pixel of the reference's grid, each bracket resampled there
-    (:func:`~hdrio.align.warp.warp_codes`), and the ``(h, w)`` mask of pixels some
-    bracket does not cover: a small aligned stack for re-solving the response."""
+    (:func:`~hdrio.align.warp.warp_codes`), and the ``(h, w)`` mask of pixels not to
+    sample (some bracket does not cover them, or they are on a sharp edge:
+    :data:`EDGE_CODES`): a small aligned stack for re-solving the response."""
     height, width = stack.shape[:2]
     rows, cols = -(-height // step), -(-width // step)
     grid = np.array([[step, 0.0, 0.0], [0.0, step, 0.0], [0.0, 0.0, 1.0]])
@@ -198,6 +207,10 @@ def sampled_stack(stack: ExposureStack, alignment: Alignment, step: int
         warp = alignment.transforms[j] @ grid
         warp_codes(stack.codes[j], warp, stack.code_max, codes[j])
         uncovered |= coverage(warp, rows, cols, 1, (height, width)) < 1
+        grey = codes[j].mean(axis=-1, dtype=np.float32)
+        spread = (scipy.ndimage.maximum_filter(grey, 3)
+                  - scipy.ndimage.minimum_filter(grey, 3))
+        uncovered |= spread > EDGE_CODES * stack.code_max / 255.0
     return replace(stack, codes=codes), uncovered
 
 

@@ -1,9 +1,12 @@
 """Resampling a bracket's code values through a warp without changing what codes mean.
 
-Output pixel ``x`` takes the moving bracket at ``W x``. Where the four codes around
+Output pixel ``x`` takes the moving bracket at ``W x``. Where the 4x4 codes around
 ``W x`` are all strictly between 0 and ``Z_max`` in a channel, that channel is
-interpolated bilinearly (in code values, then rounded: a sub-pixel shift is a blend of
-neighbours of the same kind); where any of them is clipped or black it takes the
+interpolated by Keys' cubic convolution (in code values, clamped to the four nearest
+codes so an edge does not overshoot, then rounded: a sub-pixel shift is a blend of
+neighbours of the same kind; bilinear blurred the textured truth scenes enough to
+double the merge's error there); where one of those is clipped or black but not the
+four nearest, bilinearly; where any of the four is clipped or black it takes the
 nearest code, so a saturated code is never blended with an unsaturated one (a blend
 would be a well-exposed-looking code of no real radiance). Pixels whose ``W x`` falls
 outside the bracket take the nearest edge code *and* are reported uncovered (the merge
@@ -16,6 +19,15 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(cache=True, nogil=True)
+def _keys(t):  # pragma: no cover - compiled
+    """Keys' cubic convolution weights (a = -0.5) for offsets ``-1, 0, 1, 2`` at ``t``."""
+    t2 = t * t
+    t3 = t2 * t
+    return (-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
+            -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2)
+
+
 @njit(parallel=True, cache=True, nogil=True)
 def _warp_kernel(codes, warp, code_max, out):  # pragma: no cover - compiled
     height, width, channels = codes.shape
@@ -26,22 +38,43 @@ def _warp_kernel(codes, warp, code_max, out):  # pragma: no cover - compiled
             sy = (warp[1, 0] * x + warp[1, 1] * y + warp[1, 2]) / w
             sx = min(max(sx, 0.0), width - 1.0)
             sy = min(max(sy, 0.0), height - 1.0)
-            x0 = min(int(sx), width - 2) if width > 1 else 0
-            y0 = min(int(sy), height - 2) if height > 1 else 0
-            x1 = min(x0 + 1, width - 1)
-            y1 = min(y0 + 1, height - 1)
+            x0 = int(sx)
+            y0 = int(sy)
             fx = sx - x0
             fy = sy - y0
-            nx = x1 if fx >= 0.5 else x0
-            ny = y1 if fy >= 0.5 else y0
+            nx = min(x0 + 1, width - 1) if fx >= 0.5 else x0
+            ny = min(y0 + 1, height - 1) if fy >= 0.5 else y0
+            cubic = 1 <= x0 < width - 2 and 1 <= y0 < height - 2
+            wx = _keys(fx)
+            wy = _keys(fy)
             for c in range(channels):
-                a = codes[y0, x0, c]
-                b = codes[y0, x1, c]
-                d = codes[y1, x0, c]
-                e = codes[y1, x1, c]
-                inside = ((a > 0) & (a < code_max) & (b > 0) & (b < code_max) & (d > 0)
-                          & (d < code_max) & (e > 0) & (e < code_max))
-                if inside:
+                if not cubic:
+                    out[y, x, c] = codes[ny, nx, c]
+                    continue
+                inside = True  # all 16 usable
+                near = True  # the 4 nearest usable
+                low = code_max
+                high = 0
+                value = 0.0
+                for i in range(4):
+                    row = 0.0
+                    for k in range(4):
+                        z = codes[y0 - 1 + i, x0 - 1 + k, c]
+                        usable = (z > 0) & (z < code_max)
+                        inside &= usable
+                        row += wx[k] * z
+                        if 1 <= i <= 2 and 1 <= k <= 2:
+                            near &= usable
+                            low = min(low, z)
+                            high = max(high, z)
+                    value += wy[i] * row
+                if inside:  # clamped to the four nearest: no overshoot at edges
+                    out[y, x, c] = int(min(max(value, low), high) + 0.5)
+                elif near:
+                    a = codes[y0, x0, c]
+                    b = codes[y0, x0 + 1, c]
+                    d = codes[y0 + 1, x0, c]
+                    e = codes[y0 + 1, x0 + 1, c]
                     value = ((1.0 - fy) * ((1.0 - fx) * a + fx * b)
                              + fy * ((1.0 - fx) * d + fx * e))
                     out[y, x, c] = int(value + 0.5)
