@@ -5,3 +5,9 @@ Modules, one per method: :mod:`~hdrio.align.ward2003` (median threshold bitmaps)
 (resampling codes), :mod:`~hdrio.align.registration` (the stack's alignment),
 :mod:`~hdrio.align.deghost` (consistency masks). ``hdrio.pipeline`` calls them.
 """
+
+ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")
+"""``--align``: ``auto`` measures and warps only brackets that moved; ``off``; or a model."""
+
+DEGHOST_MODES = ("auto", "off")
+"""``--deghost``."""

@@ -21,9 +21,8 @@ gets weight 0 for that bracket (:func:`hdrio.align.warp.coverage`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.ndimage
@@ -37,7 +36,8 @@ STRIDE = 2
 """Pixels tested each way within a cell (every second: a quarter of the pixels)."""
 THRESHOLD = 20.0
 """A cell is inconsistent when the mean of its samples' capped ``d^2`` exceeds this
-(still stacks: cell means 0.5-2.2 at the median, at most 16 on the truth harness's scenes with the interim noise model; a 25 % disagreement alone gives about 35)."""
+(still stacks: cell means 0.5-2.2 at the median, at most 16 on five truth scenes with
+the interim noise model; a 25 % disagreement alone gives about 35)."""
 CAP = 100.0
 """Each sample's ``d^2`` is capped here, so a few outliers (an edge, a hot pixel) cannot
 flag a cell alone: it takes at least 5 % of a cell's samples far out."""
@@ -282,4 +282,4 @@ def _interim_variance(response, exposures: np.ndarray) -> np.ndarray:
     variance[:low] = np.inf
     variance[code_max] = np.inf
     dt = np.asarray(exposures, np.float64)[:, None, None]
-    return np.ascontiguousarray((variance.T[None] / dt**2))
+    return np.ascontiguousarray(variance.T[None] / dt**2)

@@ -23,16 +23,20 @@ import numpy as np
 import scipy.ndimage
 
 from hdrio.align.lucaskanade import corner_motion, refine_LucasKanade, rescale
-from hdrio.align.pyramid import (BaseImage, base_factor, base_image, downsample,
-                                 downsample_valid, levels_above)
+from hdrio.align.pyramid import (
+    BaseImage,
+    base_factor,
+    base_image,
+    downsample,
+    downsample_valid,
+    levels_above,
+)
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.merge.debevec1997 import estimate_tables
 from hdrio.response.curve import CameraResponse
 from hdrio.skips import well_exposed_codes
 from hdrio.stack import ExposureStack
-
-ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")
 
 WITHIN = 0.1
 """``auto`` warps only when some bracket moves a corner by more than this (pixels)."""
@@ -138,7 +142,6 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
     reference = (reference_bracket(stack.codes, stack.code_max) if start is None
                  else start.reference)
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape)) if start is None else 0
-    ref_pyramid = _pyramid(bases[reference], levels)
     pyramids = {reference: _pyramid(bases[reference], levels)}
     transforms = np.repeat(np.eye(3)[None], count, axis=0)  # base pixels, then full
     # Each bracket is aligned to its neighbour towards the reference (the pair shares

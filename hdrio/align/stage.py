@@ -8,16 +8,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.align.deghost import CELL, Deghosting, _interim_variance, deghost
-from hdrio.align.registration import (ALIGN_MODES, Alignment, align_stack, linear_tables,
-                                      reference_bracket, register)
+from hdrio.align.registration import (
+    Alignment,
+    align_stack,
+    linear_tables,
+    reference_bracket,
+    register,
+)
 from hdrio.align.warp import coverage
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.masked import remerge_masked
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
-
-DEGHOST_MODES = ("auto", "off")
 
 
 @dataclass

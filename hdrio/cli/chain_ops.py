@@ -12,8 +12,10 @@ To add one (a colour operation, say), write::
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
+from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.cli.chain import (
     FLOAT_SUFFIXES,
     Chain,
@@ -117,6 +119,29 @@ def _white_balance(chain: Chain, multipliers: tuple[float, ...]) -> None:
     chain.settings["white_balance"] = multipliers
 
 
+def _mode(choices: tuple[str, ...]) -> Callable[[list[str]], str]:
+    def convert(values: list[str]) -> str:
+        if values[0] not in choices:
+            raise ValueError(f"expected one of {', '.join(choices)}")
+        return values[0]
+    return convert
+
+
+@operation("--align", "MODE", convert=_mode(ALIGN_MODES),
+           help="registration for the next --merge: auto (the default: warp only if a "
+                "bracket moved more than 0.1 px), off, translation, euclidean, homography",
+           example="a.jpg b.jpg c.jpg --align euclidean --merge")
+def _align(chain: Chain, mode: str) -> None:
+    chain.settings["align"] = mode
+
+
+@operation("--deghost", "MODE", convert=_mode(DEGHOST_MODES),
+           help="deghosting for the next --merge: auto (the default) or off",
+           example="a.jpg b.jpg c.jpg --deghost off --merge")
+def _deghost(chain: Chain, mode: str) -> None:
+    chain.settings["deghost"] = mode
+
+
 # ------------------------------------------------------------------------------ merge
 
 
@@ -151,9 +176,11 @@ def _merge(chain: Chain, domain: str) -> None:
                           exposures_from=settings.pop("exposures_from", None),
                           progress=chain.progress.bar,
                           white_balance=settings.get("white_balance"))
-    options = MergeOptions(response=settings.get("response", "Debevec1997"), merge=domain)
+    options = MergeOptions(response=settings.get("response", "Debevec1997"), merge=domain,
+                           align=settings.get("align", "auto"),
+                           deghost=settings.get("deghost", "auto"))
     result = merge_stack(stack, options, chain.progress.step,
-                         response=settings.get("response_from"))
+                         response=settings.get("response_from"), owned=True)
     chain.brackets = []
     chain.last_merge = result
     radiance = result.radiance

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.cli.colour import add_colour_options, colour_fields, display_view_from
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
@@ -60,6 +61,13 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--response-from", metavar="EXR", default=None,
                        help="use the camera response saved in an EXR written by hdrio "
                             "instead of solving (skips the solve)")
+    group.add_argument("--align", default=defaults.align, choices=ALIGN_MODES,
+                       help="register the brackets to the best-exposed one: auto (measure; "
+                            "warp only if some bracket moved more than 0.1 px), off, or a "
+                            "model to warp with (default %(default)s; docs/motion.md)")
+    group.add_argument("--deghost", default=defaults.deghost, choices=DEGHOST_MODES,
+                       help="drop observations that disagree with the reference bracket "
+                            "(moving people, leaves): auto or off (default %(default)s)")
     group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
                        choices=[*SKIPS, "all"],
                        help="turn off one of the work skips (repeatable): "
@@ -75,6 +83,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
         seed=args.seed, saturation=args.saturation, response_from=args.response_from,
         no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
+        align=args.align, deghost=args.deghost,
         **colour_fields(args),
     )
 
@@ -164,6 +173,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"merge:     {result.options.merge} domain, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        *motion_lines(result),
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
         f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"
@@ -173,6 +183,24 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     if preview is not None:
         lines.append(f"preview:   {preview} ({tonemap}) in {times['preview']:.2f} s")
     return "\n".join(lines)
+
+
+def motion_lines(result: MergeResult) -> list[str]:
+    """The summary's ``align:`` and ``deghost:`` lines."""
+    motion, lines = result.motion, []
+    if motion.alignment is not None:
+        files = tuple(Path(name).name for name in result.stack.files)
+        said = "warped" if motion.warped else "not warped"
+        lines.append(f"align:     {motion.alignment.model} to "
+                     f"{files[motion.alignment.reference]}, {said}, "
+                     f"{result.timings.get('align', 0):.2f} s"
+                     + (f"; {100 * motion.uncovered:.1f} % of pixels not covered by every "
+                        "bracket" if motion.uncovered else ""))
+        lines += [f"           {line}" for line in motion.alignment.describe(files)]
+    if motion.deghosting is not None:
+        lines.append(f"deghost:   {100 * motion.deghosting.fraction:.2f} % of pixels had a "
+                     f"bracket dropped for motion, {result.timings.get('deghost', 0):.2f} s")
+    return lines
 
 
 def add_info(sub) -> None:
