@@ -3,7 +3,7 @@
 ``python -m benchmarks.motion_pictures [docs/images]``: merges
 ``../shared/data/hdrtoolbox_stacks/{alignment,ghost}`` with ``--align off --deghost off``
 and with the defaults, tone-maps both the same way (Reinhard global, the key of the
-default merge), and writes side-by-side crops (left: off, right: auto) as PNG, plus the
+default merge), and writes side-by-side crops (left: off, right: auto) as JPEG, plus the
 motion mask of the ghost stack.
 """
 
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
         gap = np.ones((height, 4, 3))
         picture = np.concatenate([panels[0], gap, panels[1]], axis=1)
         codes = np.round(np.clip(picture, 0, 1) * 255).astype(np.uint8)
-        write_image(out / f"motion_{name}.png", codes, "uint8")
+        write_image(out / f"motion_{name}.jpg", codes, "uint8")
         print(f"{name}: {', '.join(after.motion.alignment.describe()) or 'no motion'}; "
               f"deghosted {100 * after.motion.deghosting.fraction:.1f} %")
         if name == "ghost":
