@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
-from hdrio.align.stage import Motion, align_step, check_modes, masked_merge_step
+from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
@@ -141,12 +141,17 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     start = time.perf_counter()
     if options.align != "off":
         say(f"aligning {stack.count} brackets ({options.align})")
-    stack, response, motion = align_step(
-        stack, response, options.align,
-        solve if options.exclude_colour is None else None, in_place=owned)
+    resolve = solve if options.exclude_colour is None else None
+    stack, response, motion = align_step(stack, response, options.align, resolve,
+                                         in_place=owned)
     if motion.alignment is not None and not motion.warped:
         skipped.warp = True
     timings["align"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if options.deghost != "off":
+        say("deghosting")
+    response = deghost_step(stack, response, motion, options.deghost, resolve)
+    timings["deghost"] = time.perf_counter() - start
     start = time.perf_counter()
     merged = stack
     kinds = stack.kinds
@@ -169,11 +174,10 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         statistics.pixels * merged.count)
     timings["merge"] = time.perf_counter() - start
     start = time.perf_counter()
-    if options.deghost != "off":
-        say("deghosting")
-    masked_merge_step(merged, response, radiance, motion, options.deghost, options.weighting,
-                      MERGE_METHODS.canonical(options.merge), options.saturation == "channel")
-    timings["deghost"] = time.perf_counter() - start
+    if merged is stack:  # not reduced to one covering bracket
+        remerge_step(stack, response, radiance, motion, options.weighting,
+                     MERGE_METHODS.canonical(options.merge), options.saturation == "channel")
+    timings["deghost"] += time.perf_counter() - start
     start = time.perf_counter()
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)

@@ -174,4 +174,4 @@ def refine_LucasKanade(references: list[tuple[np.ndarray, np.ndarray]],
         warp = _level(ref, ref_valid, mov, mov_valid, warp, model)
         if k > 0:
             warp = rescale(warp, 2.0)
-    return warp
+    return warp / warp[2, 2]

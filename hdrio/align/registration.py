@@ -210,11 +210,16 @@ def sampled_stack(stack: ExposureStack, alignment: Alignment, step: int
         warp = alignment.transforms[j] @ grid
         warp_codes(stack.codes[j], warp, stack.code_max, codes[j])
         uncovered |= coverage(warp, rows, cols, 1, (height, width)) < 1
-        grey = codes[j].mean(axis=-1, dtype=np.float32)
-        spread = (scipy.ndimage.maximum_filter(grey, 3)
-                  - scipy.ndimage.minimum_filter(grey, 3))
-        uncovered |= spread > EDGE_CODES * stack.code_max / 255.0
+        uncovered |= sharp_edges(codes[j], stack.code_max)
     return replace(stack, codes=codes), uncovered
+
+
+def sharp_edges(codes: np.ndarray, code_max: int) -> np.ndarray:
+    """``(H, W)``: pixels of one bracket ``(H, W, C)`` whose 3x3 neighbourhood spans more
+    than :data:`EDGE_CODES` (mean of channels)."""
+    grey = codes.mean(axis=-1, dtype=np.float32)
+    spread = scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)
+    return spread > EDGE_CODES * code_max / 255.0
 
 
 def register(stack: ExposureStack, response: CameraResponse, model: str,

@@ -16,6 +16,7 @@ from hdrio.align.registration import (
     linear_tables,
     reference_bracket,
     register,
+    sharp_edges,
 )
 from hdrio.align.warp import coverage
 from hdrio.merge.debevec1997 import merge_tables
@@ -45,6 +46,9 @@ class Motion:
     warped: bool = False
     deghosting: Deghosting | None = None
     uncovered: float = 0.0
+    keep: np.ndarray | None = None
+    """``(P, rows, cols)`` keep weights on cells of :data:`hdrio.align.deghost.CELL`
+    pixels, or ``None`` when no bracket is dropped anywhere."""
 
 
 def check_modes(align: str, deghost_mode: str) -> None:
@@ -72,14 +76,19 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
     return stack, response, motion
 
 
-def masked_merge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
-                      motion: Motion, deghost_mode: str, weighting: str, domain: str,
-                      per_channel: bool) -> None:
-    """Drop inconsistent observations (``deghost_mode`` ``auto``) and uncovered borders
-    from the merge: re-merges those pixels of ``radiance`` in place
-    (:func:`hdrio.merge.masked.remerge_masked`)."""
+def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
+                 deghost_mode: str,
+                 solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None
+                 ) -> CameraResponse:
+    """Per-bracket keep weights (``motion.keep``): uncovered borders of warped brackets
+    and, with ``deghost_mode`` ``auto``, observations inconsistent with the reference.
+
+    When motion is found and ``solve`` is given, the response is re-solved without the
+    moving pixels and returned: the sampler draws from rare code values first, and a
+    moving object's codes are rare (a bright object in one bracket bent the response
+    enough to double the error inside it on the truth scene)."""
     if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
-        return
+        return response
     count, height, width, _ = stack.codes.shape
     reference = (motion.alignment.reference if motion.alignment is not None
                  else reference_bracket(stack.codes, stack.code_max))
@@ -89,13 +98,29 @@ def masked_merge_step(stack: ExposureStack, response: CameraResponse, radiance: 
                           for j in range(count)])
         cells[reference] = 1.0
         motion.uncovered = float(np.mean(cells.min(axis=0) < 1))
-    if deghost_mode == "auto":
-        motion.deghosting = deghost(
-            stack.codes, linear_tables(response, stack.exposures),
-            _interim_variance(response, stack.exposures), reference, cells)
-        keep = motion.deghosting.keep
-    else:
-        keep = cells
+    if deghost_mode == "off":
+        motion.keep = cells
+        return response
+    motion.deghosting = deghost(
+        stack.codes, linear_tables(response, stack.exposures),
+        _interim_variance(response, stack.exposures), reference, cells)
+    motion.keep = motion.deghosting.keep
+    if solve is not None and motion.deghosting.fraction > 0:
+        dropped = motion.deghosting.keep.min(axis=0) < 1
+        exclude = np.repeat(np.repeat(dropped, CELL, axis=0), CELL, axis=1)[:height, :width]
+        if motion.warped:  # as register's re-solve: no invented borders, no sharp edges
+            for j in range(count):
+                exclude |= sharp_edges(stack.codes[j], stack.code_max)
+        response = solve(stack, exclude)
+    return response
+
+
+def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
+                 motion: Motion, weighting: str, domain: str, per_channel: bool) -> None:
+    """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
+    bracket (:func:`hdrio.merge.masked.remerge_masked`)."""
+    if motion.keep is None:
+        return
     terms, estimates = merge_tables(response, stack.exposures, weighting, domain)
-    remerge_masked(stack.codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
-                   domain == "log", radiance)
+    remerge_masked(stack.codes, motion.keep, CELL, terms, estimates, stack.code_max,
+                   per_channel, domain == "log", radiance)

@@ -29,7 +29,7 @@ def _keys(t):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _warp_kernel(codes, warp, code_max, out):  # pragma: no cover - compiled
+def _warp_kernel(codes, warp, code_max, interpolate, out):  # pragma: no cover - compiled
     height, width, channels = codes.shape
     for y in prange(out.shape[0]):
         for x in range(out.shape[1]):
@@ -44,7 +44,7 @@ def _warp_kernel(codes, warp, code_max, out):  # pragma: no cover - compiled
             fy = sy - y0
             nx = min(x0 + 1, width - 1) if fx >= 0.5 else x0
             ny = min(y0 + 1, height - 1) if fy >= 0.5 else y0
-            cubic = 1 <= x0 < width - 2 and 1 <= y0 < height - 2
+            cubic = interpolate and 1 <= x0 < width - 2 and 1 <= y0 < height - 2
             wx = _keys(fx)
             wy = _keys(fy)
             for c in range(channels):
@@ -83,14 +83,15 @@ def _warp_kernel(codes, warp, code_max, out):  # pragma: no cover - compiled
 
 
 def warp_codes(codes: np.ndarray, warp: np.ndarray, code_max: int,
-               out: np.ndarray | None = None) -> np.ndarray:
+               out: np.ndarray | None = None, interpolate: bool = True) -> np.ndarray:
     """``codes`` ``(H, W, C)`` resampled at ``warp @ (x, y, 1)`` (full-resolution pixels).
 
     ``out`` (same dtype, not ``codes`` itself; by default ``codes``' shape) receives the
-    result, for ``x, y`` over its own rows and columns."""
+    result, for ``x, y`` over its own rows and columns. ``interpolate`` false takes the
+    nearest code everywhere."""
     if out is None:
         out = np.empty_like(codes)
-    _warp_kernel(codes, np.ascontiguousarray(warp, np.float64), code_max, out)
+    _warp_kernel(codes, np.ascontiguousarray(warp, np.float64), code_max, interpolate, out)
     return out
 
 
