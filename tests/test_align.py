@@ -206,3 +206,27 @@ def test_moving_objects_are_deghosted(truth_scene):
     assert fixed["median"] <= 3 * base["median"], (fixed, base)
     assert left["median"] > 5 * base["median"], (left, base)
     assert 0.01 < result.motion.deghosting.fraction < 0.3
+
+
+def test_options_in_hdrio_merge_and_the_chain(brackets, out_dir, capsys):
+    from tests.conftest import run_cli
+    from tests.test_cli_chain import exr_header
+
+    code, stdout, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "m.exr",
+                                "--align", "translation", "--deghost", "off")
+    assert code == 0, err
+    assert "align:     translation" in stdout
+    header = exr_header(out_dir / "m.exr")
+    assert header["hdrio:align"] == "translation" and header["hdrio:deghost"] == "off"
+    code, _, err = run_cli(capsys, *brackets, "--align", "off", "--deghost", "auto",
+                           "--merge", "-o", out_dir / "c.exr")
+    assert code == 0, err
+    header = exr_header(out_dir / "c.exr")
+    assert header["hdrio:align"] == "off" and "hdrio:alignTransforms" not in header
+    assert "hdrio:deghostedFraction" in header
+    code, _, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "x.exr",
+                           "--align", "sideways")
+    assert code == 2 and "--align" in err
+    code, _, err = run_cli(capsys, *brackets, "--deghost", "maybe", "--merge",
+                           "-o", out_dir / "y.exr")
+    assert code == 2 and "--deghost" in err
