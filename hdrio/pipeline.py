@@ -67,6 +67,7 @@ class MergeOptions:
     # Registration and deghosting (hdrio.align): docs/motion.md.
     align: str = "auto"  # auto | off | translation | euclidean | homography
     deghost: str = "auto"  # auto | off
+    motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
 
     @property
     def skips(self) -> frozenset[str]:
@@ -321,8 +322,11 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     if pixel_type == "half":
         result.exposure_scale = half_safe_scale(radiance)
     say(f"writing {output}")
+    layers = None
+    if options.motion_layer and result.motion.deghosting is not None:
+        layers = {"motion.Y": result.motion.deghosting.motion_mask(*radiance.shape[:2])}
     write_exr(output, radiance, exr_attributes(result), pixel_type=pixel_type,
-              scale=result.exposure_scale)
+              scale=result.exposure_scale, layers=layers)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()

@@ -230,3 +230,19 @@ def test_options_in_hdrio_merge_and_the_chain(brackets, out_dir, capsys):
     code, _, err = run_cli(capsys, *brackets, "--deghost", "maybe", "--merge",
                            "-o", out_dir / "y.exr")
     assert code == 2 and "--deghost" in err
+
+
+def test_motion_layer_is_written_when_asked(brackets, out_dir, capsys):
+    import OpenImageIO as oiio
+
+    from tests.conftest import run_cli
+
+    code, _, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "m.exr",
+                           "--motion-layer")
+    assert code == 0, err
+    image = oiio.ImageBuf(str(out_dir / "m.exr"))
+    assert tuple(image.spec().channelnames) == ("R", "G", "B", "motion.Y")
+    mask = image.get_pixels(oiio.FLOAT)[..., 3]
+    assert np.all(mask == 0)  # a still stack: nothing dropped
+    code, _, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "n.exr")
+    assert oiio.ImageBuf(str(out_dir / "n.exr")).spec().nchannels == 3

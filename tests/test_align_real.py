@@ -34,3 +34,22 @@ def test_walking_people_are_deghosted(shared_data):
     header = exr_attributes(result)
     assert header["hdrio:deghostedFraction"] == pytest.approx(result.motion.deghosting.fraction)
     assert header["hdrio:align"] == "auto" and len(header["hdrio:alignTransforms"]) == 3
+
+
+def test_readme_and_docs_examples(shared_data, tmp_path, capsys):
+    """README's and docs/motion.md's commands on the HDR Toolbox stacks."""
+    from tests.conftest import run_cli
+
+    folder = shared_data("hdrtoolbox_stacks")
+    sidecar = folder / "exposures.csv"
+    canal = sorted((folder / "alignment").glob("*.jpg"))
+    code, stdout, err = run_cli(capsys, "merge", *canal, "--exposures-from", sidecar,
+                                "-o", tmp_path / "canal.exr", "--preview",
+                                tmp_path / "canal.jpg")
+    assert code == 0, err
+    assert "align:     euclidean" in stdout and "warped" in stdout
+    hall = sorted((folder / "ghost").glob("*.JPG"))
+    code, stdout, err = run_cli(capsys, "merge", *hall, "--exposures-from", sidecar,
+                                "-o", tmp_path / "hall.exr", "--deghost", "auto")
+    assert code == 0, err
+    assert "deghost:" in stdout

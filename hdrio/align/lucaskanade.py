@@ -166,6 +166,28 @@ def _level(reference, ref_valid, moving, mov_valid, warp, model, points, converg
     return to_pixels @ warp_n @ to_normal
 
 
+def residual(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
+             mov_valid: np.ndarray, warp: np.ndarray, points: int = POINTS) -> float:
+    """The robust misfit of ``warp`` on one level: the median absolute deviation of
+    ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest reference
+    gradients where both are usable (``inf`` when too few are)."""
+    h, w = reference.shape
+    gy, gx = np.gradient(reference)
+    index = np.flatnonzero(ref_valid)
+    if index.size > points:
+        strength = (gx * gx + gy * gy).reshape(-1)[index]
+        index = index[np.argpartition(strength, -points)[-points:]]
+    py, px = np.divmod(index, w)
+    mx, my = _apply(warp, px.astype(np.float64), py.astype(np.float64))
+    values = np.empty(index.size)
+    good = np.empty(index.size, np.bool_)
+    _sample(moving, mov_valid, mx, my, values, good)
+    if np.count_nonzero(good) < MIN_POINTS:
+        return np.inf
+    error = values[good] - reference.reshape(-1)[index][good]
+    return float(np.median(np.abs(error - np.median(error))))
+
+
 def refine_LucasKanade(references: list[tuple[np.ndarray, np.ndarray]],
                        movings: list[tuple[np.ndarray, np.ndarray]], warp: np.ndarray,
                        model: str = "euclidean") -> np.ndarray:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.ndimage
 
-from hdrio.align.lucaskanade import corner_motion, refine_LucasKanade, rescale
+from hdrio.align.lucaskanade import corner_motion, refine_LucasKanade, rescale, residual
 from hdrio.align.pyramid import (
     BaseImage,
     base_factor,
@@ -33,6 +33,7 @@ from hdrio.align.pyramid import (
 )
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
+from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import estimate_tables
 from hdrio.response.curve import CameraResponse
 from hdrio.skips import well_exposed_codes
@@ -46,6 +47,10 @@ REFINE_LEVELS = 4
 within a base pixel; 4 levels absorb a rotation moving the corners by 16 base pixels)."""
 
 SMOOTHING = 1.0
+
+IMPROVEMENT = 0.8
+"""A bracket's measured warp is kept only when its misfit is under this fraction of the
+misfit of no motion (:func:`hdrio.align.lucaskanade.residual`)."""
 
 MTB_LEVELS = 6
 """Median-threshold-bitmap levels: shifts up to 63 base pixels (252 pixels at 24 MP)."""
@@ -158,6 +163,13 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
                             1.0 / factor)
         pyramids[j] = _pyramid(bases[j], levels)
         step = refine_LucasKanade(pyramids[k], pyramids[j], guess, model)
+        # Keep the estimate only if it fits clearly better than no motion at all: where
+        # the scene gives no purchase (a smooth gradient, clipping that moves the
+        # bitmaps' medians) any shift fits as well, and the camera most likely held still.
+        fine_k, fine_j = pyramids[k][0], pyramids[j][0]
+        if (residual(*fine_k, *fine_j, step)
+                > IMPROVEMENT * residual(*fine_k, *fine_j, np.eye(3))):
+            step = np.eye(3)
         transforms[j] = step @ transforms[k]
         if j != k and abs(j - reference) > 1:
             pyramids.pop(k)  # no longer needed: keep two or three pyramids at most
@@ -239,5 +251,8 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
         return alignment, response
     step = base_factor(*stack.shape[:2])
     small, uncovered = sampled_stack(stack, alignment, step)
-    response = solve(small, uncovered)
+    try:
+        response = solve(small, uncovered)
+    except HdrioError:  # too little left to solve from: keep the first response
+        return alignment, response
     return estimate_alignment(stack, response, model, start=alignment), response

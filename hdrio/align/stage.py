@@ -19,6 +19,7 @@ from hdrio.align.registration import (
     sharp_edges,
 )
 from hdrio.align.warp import coverage
+from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.masked import remerge_masked
 from hdrio.response.curve import CameraResponse
@@ -111,7 +112,10 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         if motion.warped:  # as register's re-solve: no invented borders, no sharp edges
             for j in range(count):
                 exclude |= sharp_edges(stack.codes[j], stack.code_max)
-        response = solve(stack, exclude)
+        try:
+            response = solve(stack, exclude)
+        except HdrioError:  # too little left to solve from: keep the first response
+            pass
     return response
 
 

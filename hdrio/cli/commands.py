@@ -68,6 +68,9 @@ def _add_merge_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--deghost", default=defaults.deghost, choices=DEGHOST_MODES,
                        help="drop observations that disagree with the reference bracket "
                             "(moving people, leaves): auto or off (default %(default)s)")
+    group.add_argument("--motion-layer", action="store_true",
+                       help="also write the deghosting mask as the EXR channel motion.Y "
+                            "(1: some bracket dropped for motion)")
     group.add_argument("--no-skip", action="append", default=[], metavar="NAME",
                        choices=[*SKIPS, "all"],
                        help="turn off one of the work skips (repeatable): "
@@ -83,7 +86,7 @@ def options_from(args: argparse.Namespace) -> MergeOptions:
         merge=MERGE_METHODS.canonical(args.merge), exclude_colour=args.exclude_color,
         seed=args.seed, saturation=args.saturation, response_from=args.response_from,
         no_skip=tuple(SKIPS) if "all" in args.no_skip else tuple(args.no_skip),
-        align=args.align, deghost=args.deghost,
+        align=args.align, deghost=args.deghost, motion_layer=args.motion_layer,
         **colour_fields(args),
     )
 

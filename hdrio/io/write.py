@@ -72,11 +72,14 @@ def _temporary_beside(path: Path) -> Path:
 
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
-                band: Callable[[np.ndarray], np.ndarray] | None = None) -> Path:
+                band: Callable[[np.ndarray], np.ndarray] | None = None,
+                channel_names: Sequence[str] | None = None) -> Path:
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
     Rows go out in bands of 64, each through ``band`` first when given (a conversion
-    applied band by band needs no full-size copy of the image).
+    applied band by band needs no full-size copy of the image). ``pixels`` may be any
+    object with ``shape`` whose row slices are arrays. ``channel_names`` replaces
+    OpenImageIO's defaults (``R, G, B, A``, ...).
     """
     import OpenImageIO as oiio
 
@@ -85,6 +88,8 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
         raise OutputError(f"{path}: folder {path.parent} does not exist")
     height, width, channels = pixels.shape
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
+    if channel_names is not None:
+        spec.channelnames = tuple(channel_names)
     for name, value in (attributes or {}).items():
         type_name, stored = _type_of(value)
         spec.attribute(name, oiio.TypeDesc(type_name), stored)
@@ -110,29 +115,49 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     return path
 
 
+class _WithLayers:
+    """RGB rows with extra one-channel layers appended, a band at a time (no copy)."""
+
+    def __init__(self, rgb: np.ndarray, layers: list[np.ndarray]) -> None:
+        self.rgb, self.layers = rgb, layers
+        self.shape = (*rgb.shape[:2], rgb.shape[2] + len(layers))
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        return np.concatenate([np.asarray(self.rgb[rows], np.float32)]
+                              + [layer[rows, :, None] for layer in self.layers], axis=-1)
+
+
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
-              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0) -> Path:
+              pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
+              layers: Mapping[str, np.ndarray] | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
     range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
-    :func:`hdrio.pipeline.half_safe_scale`).
+    :func:`hdrio.pipeline.half_safe_scale`). ``layers`` (channel name, e.g.
+    ``motion.Y``, to an ``(H, W)`` array of values in [0, 1]) are written after R, G, B,
+    unscaled.
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
     factor = np.float32(scale)
 
     def band(rows: np.ndarray) -> np.ndarray:
-        rows = np.asarray(rows, dtype=np.float32)
+        rows = np.array(rows, dtype=np.float32)
+        colour = rows[..., :rgb.shape[2]]
         if factor != 1:
-            rows = rows * factor
+            colour *= factor
         if pixel_type == "half":
-            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX)
+            np.clip(colour, HALF_MIN_POSITIVE, HALF_MAX, out=colour)
         return rows
 
     attributes = {"compression": compression, **(attributes or {})}
-    return write_image(path, rgb, pixel_type, attributes, band)
+    if not layers:
+        return write_image(path, rgb, pixel_type, attributes, band)
+    names = (["R", "G", "B"] if rgb.shape[2] == 3 else ["Y"]) + list(layers)
+    return write_image(path, _WithLayers(rgb, list(layers.values())), pixel_type, attributes,
+                       band, channel_names=names)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:
