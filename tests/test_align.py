@@ -246,3 +246,24 @@ def test_motion_layer_is_written_when_asked(brackets, out_dir, capsys):
     assert np.all(mask == 0)  # a still stack: nothing dropped
     code, _, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "n.exr")
     assert oiio.ImageBuf(str(out_dir / "n.exr")).spec().nchannels == 3
+
+
+def test_quick_check_tells_still_from_moving(truth_scene):
+    from hdrio.align.quick import looks_still
+    from hdrio.align.registration import linear_tables
+    from hdrio.response import RESPONSE_METHODS
+
+    _, _, _, still = truth_scene
+    moving, _, reference = _moving(truth_scene, 0)
+    response = RESPONSE_METHODS["Debevec1997"](still)
+    linear = linear_tables(response, still.exposures)
+    assert looks_still(still.codes, linear, 255, reference)
+    assert not looks_still(moving.codes, linear, 255, reference)
+    # A quarter-pixel shift of one bracket (above auto's 0.1 px) is seen too.
+    from tests.align_truth import render, view
+
+    crop, _, exposures, _ = truth_scene
+    shifted = np.array([[1.0, 0.0, 0.25], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    views = [view(crop, np.eye(3) if j == reference else shifted) for j in range(3)]
+    nudged = render(views, exposures)
+    assert not looks_still(nudged, linear, 255, reference)

@@ -10,6 +10,7 @@ import numpy as np
 
 from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.align.deghost import CELL, Deghosting, _interim_variance, deghost
+from hdrio.align.quick import looks_still
 from hdrio.align.registration import (
     Alignment,
     align_stack,
@@ -70,6 +71,13 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
     if mode == "off" or stack.count < 2:
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
+    if mode == "auto":
+        reference = reference_bracket(stack.codes, stack.code_max)
+        if looks_still(stack.codes, linear_tables(response, stack.exposures),
+                       stack.code_max, reference):
+            motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
+                                         model, (0.0,) * stack.count)
+            return stack, response, motion
     motion.alignment, response = register(stack, response, model, solve)
     if mode != "auto" or motion.alignment.moved:
         stack = align_stack(stack, motion.alignment, in_place=in_place)
