@@ -20,18 +20,23 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True)
-def _keys(t):  # pragma: no cover - compiled
-    """Keys' cubic convolution weights (a = -0.5) for offsets ``-1, 0, 1, 2`` at ``t``."""
+def _keys(t, weights):  # pragma: no cover - compiled
+    """Keys' cubic convolution weights (a = -0.5) for offsets ``-1, 0, 1, 2`` at ``t``,
+    into ``weights`` (an array: numba indexes a tuple by a loop variable slowly)."""
     t2 = t * t
     t3 = t2 * t
-    return (-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
-            -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2)
+    weights[0] = -0.5 * t3 + t2 - 0.5 * t
+    weights[1] = 1.5 * t3 - 2.5 * t2 + 1.0
+    weights[2] = -1.5 * t3 + 2.0 * t2 + 0.5 * t
+    weights[3] = 0.5 * t3 - 0.5 * t2
 
 
 @njit(parallel=True, cache=True, nogil=True)
 def _warp_kernel(codes, warp, code_max, interpolate, out):  # pragma: no cover - compiled
     height, width, channels = codes.shape
     for y in prange(out.shape[0]):
+        wx = np.empty(4)
+        wy = np.empty(4)
         for x in range(out.shape[1]):
             w = warp[2, 0] * x + warp[2, 1] * y + warp[2, 2]
             sx = (warp[0, 0] * x + warp[0, 1] * y + warp[0, 2]) / w
@@ -45,8 +50,8 @@ def _warp_kernel(codes, warp, code_max, interpolate, out):  # pragma: no cover -
             nx = min(x0 + 1, width - 1) if fx >= 0.5 else x0
             ny = min(y0 + 1, height - 1) if fy >= 0.5 else y0
             cubic = interpolate and 1 <= x0 < width - 2 and 1 <= y0 < height - 2
-            wx = _keys(fx)
-            wy = _keys(fy)
+            _keys(fx, wx)
+            _keys(fy, wy)
             for c in range(channels):
                 if not cubic:
                     out[y, x, c] = codes[ny, nx, c]
