@@ -144,7 +144,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         say(f"aligning {stack.count} brackets ({options.align})")
     resolve = solve if options.exclude_colour is None else None
     stack, response, motion = align_step(stack, response, options.align, resolve,
-                                         in_place=owned)
+                                         in_place=owned, skip_warp="warp" in skips)
     if motion.alignment is not None and not motion.warped:
         skipped.warp = True
     timings["align"] = time.perf_counter() - start

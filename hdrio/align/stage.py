@@ -10,6 +10,7 @@ import numpy as np
 
 from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.align.deghost import CELL, Deghosting, _interim_variance, deghost
+from hdrio.align.pyramid import base_factor
 from hdrio.align.quick import looks_still
 from hdrio.align.registration import (
     Alignment,
@@ -64,14 +65,16 @@ def check_modes(align: str, deghost_mode: str) -> None:
 
 def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
                solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None,
-               in_place: bool = False) -> tuple[ExposureStack, CameraResponse, Motion]:
+               in_place: bool = False, skip_warp: bool = True
+               ) -> tuple[ExposureStack, CameraResponse, Motion]:
     """Measure and (unless ``auto`` finds nothing moved) warp; ``solve`` re-solves the
-    response on the aligned brackets (``None``: keep ``response``, e.g. a saved one)."""
+    response on the aligned brackets (``None``: keep ``response``, e.g. a saved one).
+    ``skip_warp`` false (``--no-skip warp``) makes ``auto`` measure fully and warp."""
     motion = Motion()
     if mode == "off" or stack.count < 2:
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
-    if mode == "auto":
+    if mode == "auto" and skip_warp:
         reference = reference_bracket(stack.codes, stack.code_max)
         if looks_still(stack.codes, linear_tables(response, stack.exposures),
                        stack.code_max, reference):
@@ -79,7 +82,7 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
                                          model, (0.0,) * stack.count)
             return stack, response, motion
     motion.alignment, response = register(stack, response, model, solve)
-    if mode != "auto" or motion.alignment.moved:
+    if mode != "auto" or motion.alignment.moved or not skip_warp:
         stack = align_stack(stack, motion.alignment, in_place=in_place)
         motion.warped = True
     return stack, response, motion
@@ -118,8 +121,9 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         dropped = motion.deghosting.keep.min(axis=0) < 1
         exclude = np.repeat(np.repeat(dropped, CELL, axis=0), CELL, axis=1)[:height, :width]
         if motion.warped:  # as register's re-solve: no invented borders, no sharp edges
+            step = base_factor(height, width)  # the solve samples a coarse grid anyway
             for j in range(count):
-                exclude |= sharp_edges(stack.codes[j], stack.code_max)
+                exclude |= sharp_edges(stack.codes[j], stack.code_max, step)
         try:
             response = solve(stack, exclude)
         except HdrioError:  # too little left to solve from: keep the first response
