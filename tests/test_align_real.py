@@ -15,12 +15,14 @@ def _stack(shared_data, name):
     return read_brackets(files, exposures_from=folder / "exposures.csv")
 
 
-def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data):
+def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkeypatch):
     result = merge_stack(_stack(shared_data, "alignment"), MergeOptions())
     motion = result.motion
     assert motion.warped and max(motion.alignment.motion) > 10  # it was hand-held
     # The residual: the same measurement (the strongest gradients: edges) on the aligned
-    # brackets. The bound is 0.5 px; measured 0.1-0.2 px at the corners.
+    # brackets, every estimate kept (not snapped to no motion when it fits no better).
+    # The bound is 0.5 px; measured 0.03 and 0.10 px at the corners.
+    monkeypatch.setattr("hdrio.align.registration.IMPROVEMENT", float("inf"))
     residual = estimate_alignment(result.stack, result.response)
     assert max(residual.motion) < 0.5, residual.motion
 
