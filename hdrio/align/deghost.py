@@ -65,13 +65,14 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _consistency(codes, estimates, variance, reference, cell, stride, cap, sums,
+def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, sums,
                  counts):  # pragma: no cover - compiled
     """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
-    3x3 neighbourhood (0 inside it): a resampled bracket differs from the reference at
-    sharp edges by a fraction of a pixel's blur, which is not motion."""
+    3x3 neighbourhood (0 inside it) when the brackets were ``resampled``: a resampled
+    bracket differs from the reference at sharp edges by a fraction of a pixel's blur,
+    which is not motion. Otherwise from the reference's own estimate (9x fewer reads)."""
     count, height, width, channels = codes.shape
     rows, cols = sums.shape[1], sums.shape[2]
     for cy in prange(rows):
@@ -88,8 +89,11 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, sums,
                         z = codes[reference, y, x, c]
                         start_var[c] = variance[reference, c, z]
                         if np.isfinite(start_var[c]):
-                            start_low[c], start_high[c] = _local_range(
-                                codes, estimates, variance, reference, y, x, c)
+                            if resampled:
+                                start_low[c], start_high[c] = _local_range(
+                                    codes, estimates, variance, reference, y, x, c)
+                            else:
+                                start_low[c] = start_high[c] = estimates[reference, c, z]
                     for direction in (-1, 1):
                         low[:] = start_low
                         high[:] = start_high
@@ -108,9 +112,11 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, sums,
                                     d = max(0.0, e - high[c], low[c] - e)
                                     total += min(d * d / (v + chain_var[c]), cap)
                                     used += 1
-                                else:  # the reference is clipped or black: j takes over
-                                    low[c], high[c] = _local_range(codes, estimates,
-                                                                   variance, j, y, x, c)
+                                elif resampled:  # the reference is clipped or black:
+                                    low[c], high[c] = _local_range(  # j takes over
+                                        codes, estimates, variance, j, y, x, c)
+                                else:
+                                    low[c] = high[c] = e
                                     chain_var[c] = v
                             sums[j, cy, cx] += total
                             counts[j, cy, cx] += used
@@ -218,7 +224,7 @@ class Deghosting:
 
 def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, reference: int,
             coverage: np.ndarray | None = None, cell: int = CELL,
-            threshold: float = THRESHOLD) -> Deghosting:
+            threshold: float = THRESHOLD, resampled: bool = True) -> Deghosting:
     """Keep weights for every bracket of ``codes`` against bracket ``reference``.
 
     Parameters
@@ -234,6 +240,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         The bracket the others are tested against (never dropped).
     coverage
         ``(P, rows, cols)`` cells each warped bracket covers (1) or not (0), or ``None``.
+    resampled
+        Whether the brackets were warped (then each is tested against the reference's
+        3x3 range, not its pixel).
     """
     count, height, width, _ = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
@@ -241,7 +250,8 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     counts = np.zeros((count, rows, cols), np.int64)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
-    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, sums, counts)
+    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, sums,
+                 counts)
     mean = sums / np.maximum(counts, 1)
     flagged = (mean > threshold) & (counts >= MIN_SAMPLES)
     flagged[reference] = False

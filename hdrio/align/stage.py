@@ -115,7 +115,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         return response
     motion.deghosting = deghost(
         stack.codes, linear_tables(response, stack.exposures),
-        _interim_variance(response, stack.exposures), reference, cells)
+        _interim_variance(response, stack.exposures), reference, cells,
+        resampled=motion.warped)
     motion.keep = motion.deghosting.keep
     if solve is not None and motion.deghosting.fraction > 0:
         dropped = motion.deghosting.keep.min(axis=0) < 1
