@@ -38,6 +38,9 @@ THRESHOLD = 20.0
 """A cell is inconsistent when the mean of its samples' capped ``d^2`` exceeds this
 (still stacks: cell means 0.5-2.2 at the median, at most 16 on five truth scenes with
 the interim noise model; a 25 % disagreement alone gives about 35)."""
+SCALED_MAX = 60.0
+"""The most the threshold is raised for a bracket whose still cells disagree more than
+the noise model says (see :func:`deghost`)."""
 CAP = 100.0
 """Each sample's ``d^2`` is capped here, so a few outliers (an edge, a hot pixel) cannot
 flag a cell alone: it takes at least 5 % of a cell's samples far out."""
@@ -66,7 +69,7 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
 
 @njit(parallel=True, cache=True, nogil=True)
 def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, sums,
-                 counts):  # pragma: no cover - compiled
+                 counts, takeovers):  # pragma: no cover - compiled
     """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
@@ -112,12 +115,15 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                     d = max(0.0, e - high[c], low[c] - e)
                                     total += min(d * d / (v + chain_var[c]), cap)
                                     used += 1
-                                elif resampled:  # the reference is clipped or black:
-                                    low[c], high[c] = _local_range(  # j takes over
+                                    continue
+                                # The reference is clipped or black here: j takes over.
+                                chain_var[c] = v
+                                takeovers[j, cy, cx] += 1
+                                if resampled:
+                                    low[c], high[c] = _local_range(
                                         codes, estimates, variance, j, y, x, c)
                                 else:
                                     low[c] = high[c] = e
-                                    chain_var[c] = v
                             sums[j, cy, cx] += total
                             counts[j, cy, cx] += used
                             j += direction
@@ -248,12 +254,23 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     rows, cols = -(-height // cell), -(-width // cell)
     sums = np.zeros((count, rows, cols))
     counts = np.zeros((count, rows, cols), np.int64)
+    takeovers = np.zeros((count, rows, cols), np.int64)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
     _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, sums,
-                 counts)
+                 counts, takeovers)
     mean = sums / np.maximum(counts, 1)
-    flagged = (mean > threshold) & (counts >= MIN_SAMPLES)
+    judged = counts >= MIN_SAMPLES
+    # The noise model's scale, checked on the stack itself: most cells of a bracket are
+    # still, so their median mean d^2 says how far the model under-states the noise
+    # (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG against its 8 s). The
+    # threshold is raised by that factor, up to SCALED_MAX (a moving object's cells sit
+    # near CAP).
+    limits = np.full(count, threshold)
+    for j in range(count):
+        if judged[j].any():
+            limits[j] = min(SCALED_MAX, threshold * max(1.0, float(np.median(mean[j][judged[j]]))))
+    flagged = (mean > limits[:, None, None]) & judged
     flagged[reference] = False
     keep = np.ones((count, rows, cols), np.float32)
     moved = np.zeros((rows, cols), bool)
@@ -264,6 +281,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         soft = scipy.ndimage.gaussian_filter(grown.astype(np.float32), 1.0, mode="nearest")
         drop = np.maximum(grown, np.clip(2.0 * soft, 0.0, 1.0))
         drop[drop < 0.02] = 0.0
+        # Where j stands in for a clipped or black reference it is the scene's best
+        # observation: growing and feathering must not drop it there.
+        drop[(takeovers[j] > counts[j]) & ~flagged[j]] = 0.0
         keep[j] = 1.0 - drop
         moved |= drop > 0
     if coverage is not None:
