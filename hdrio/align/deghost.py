@@ -118,7 +118,8 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                     continue
                                 # The reference is clipped or black here: j takes over.
                                 chain_var[c] = v
-                                takeovers[j, cy, cx] += 1
+                                if direction < 0:  # a shorter bracket for a clipped one
+                                    takeovers[j, cy, cx] += 1
                                 if resampled:
                                     low[c], high[c] = _local_range(
                                         codes, estimates, variance, j, y, x, c)
@@ -281,8 +282,10 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         soft = scipy.ndimage.gaussian_filter(grown.astype(np.float32), 1.0, mode="nearest")
         drop = np.maximum(grown, np.clip(2.0 * soft, 0.0, 1.0))
         drop[drop < 0.02] = 0.0
-        # Where j stands in for a clipped or black reference it is the scene's best
-        # observation: growing and feathering must not drop it there.
+        # Where a shorter j stands in for a clipped reference it is the scene's only
+        # observation: growing and feathering must not drop it there. (Not for a longer
+        # j under a dark reference: dark clothes fall below the usable codes, and the
+        # background a longer bracket shows there is a ghost.)
         drop[(takeovers[j] > counts[j]) & ~flagged[j]] = 0.0
         keep[j] = 1.0 - drop
         moved |= drop > 0
