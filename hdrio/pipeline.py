@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
+from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
@@ -83,6 +84,10 @@ class MergeOptions:
     # Also predict each pixel's relative standard deviation (hdrio.merge.uncertainty),
     # written as the EXR layer "uncertainty".
     uncertainty: bool = False
+    # Registration and deghosting (hdrio.align): docs/motion.md.
+    align: str = "auto"  # auto | off | translation | euclidean | homography
+    deghost: str = "auto"  # auto | off
+    motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
 
     def __post_init__(self) -> None:
         check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
@@ -107,6 +112,7 @@ class MergeResult:
     noise: NoiseModel | None = None
     uncertainty: np.ndarray | None = None
     """``sigma_E / E`` per pixel and channel (``--uncertainty``), else ``None``."""
+    motion: Motion = field(default_factory=Motion)
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -145,18 +151,22 @@ def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.nda
 
 def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                 progress: Progress | None = None,
-                response: CameraResponse | None = None) -> MergeResult:
-    """Recover the response and merge ``stack`` (no file I/O).
+                response: CameraResponse | None = None, owned: bool = False) -> MergeResult:
+    """Recover the response, align and merge ``stack`` (no file I/O).
 
     ``response``, when given (e.g. read back with :func:`hdrio.response.stored.read_response`),
     is used instead of a solve; camera RAW stacks use the linear response. The skips in
     ``options.skips`` apply (:mod:`hdrio.skips`); ``result.skipped`` says which did.
+    ``owned``: the caller hands the stack over (its codes may be warped in place, so
+    alignment needs no second copy of the brackets); otherwise ``stack`` is left as is.
     """
     say = progress or (lambda message: None)
+    check_modes(options.align, options.deghost)
     skips = options.skips
     skipped = SkipReport(dropped=list(stack.dropped))
     timings: dict[str, float] = {}
     start = time.perf_counter()
+    solve = None
     if response is not None:
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
@@ -165,14 +175,17 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             announce(say, "response")
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
-        try:
-            response = RESPONSE_METHODS[method](
+
+        def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+            return RESPONSE_METHODS[method](
                 stack, smoothing=options.smoothing, weighting=options.weighting,
-                sampling=options.sampling, samples=options.samples,
-                exclude=exclusion_mask(stack, options.exclude_colour), seed=options.seed,
+                sampling=options.sampling, samples=options.samples, exclude=exclude,
+                seed=options.seed,
                 **({"solve_identical_once": "channels" in skips} if method != "linear"
-                   else {}),
-            )
+                   else {}))
+
+        try:
+            response = solve(stack, exclusion_mask(stack, options.exclude_colour))
         except ResponseSolveError as error:
             message = str(error).replace("a saved response", "a saved response "
                                          "(--response-from EXR, from an earlier merge)")
@@ -181,6 +194,25 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
     timings["response"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if options.align != "off":
+        say(f"aligning {stack.count} brackets ({options.align})")
+    resolve = solve if options.exclude_colour is None else None
+    stack, response, motion = align_step(stack, response, options.align, resolve,
+                                         in_place=owned, skip_warp="warp" in skips)
+    if motion.alignment is not None and not motion.warped:
+        skipped.warp = True
+    timings["align"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if options.deghost != "off":
+        say("deghosting")
+    code_floor = code_variance_floor(stack.files)
+    if options.deghost != "off" and stack.count > 1:
+        before = fit_noise(stack.codes, stack.exposures, response, code_floor=code_floor)
+    else:
+        before = None
+    response = deghost_step(stack, response, motion, options.deghost, resolve, before)
+    timings["deghost"] = time.perf_counter() - start
     start = time.perf_counter()
     merged = stack
     kinds = stack.kinds
@@ -196,9 +228,9 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             dropped=stack.dropped + tuple((name, f"{skipped.covering} covers the range")
                                           for name in stack.files if name != stack.files[j]))
     method = MERGE_METHODS.canonical(options.merge)
-    noise = (fit_noise(stack.codes, stack.exposures, response,
-                       code_floor=code_variance_floor(stack.files))
-             if method in NOISE_AWARE or options.uncertainty else None)
+    noise = None
+    if method in NOISE_AWARE or options.uncertainty:  # on the final (re-solved) response
+        noise = fit_noise(stack.codes, stack.exposures, response, code_floor=code_floor)
     announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](
@@ -206,22 +238,29 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         early_stop="early-stop" in skips, noise=noise)
     skipped.early_stop_fraction = statistics.observations_skipped / (
         statistics.pixels * merged.count)
+    timings["merge"] = time.perf_counter() - start
+    start = time.perf_counter()
+    weights = effective_weights(method, response, merged.exposures, options.weighting, noise)
+    if merged is stack:  # not reduced to one covering bracket
+        remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
+                     options.saturation == "channel")
+    timings["deghost"] += time.perf_counter() - start
+    start = time.perf_counter()
     uncertainty = None
     if options.uncertainty:
         say("predicting each pixel's uncertainty")
-        uncertainty = relative_uncertainty(
-            merged, response, effective_weights(method, response, merged.exposures,
-                                                options.weighting, noise),
-            noise, merge_domain(method), options.saturation)
+        uncertainty = relative_uncertainty(merged, response, weights, noise,
+                                           merge_domain(method), options.saturation)
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
-    timings["merge"] = time.perf_counter() - start
+    timings["merge"] += time.perf_counter() - start
     radiance, colour = colour_stage(
         stack, response, radiance, input_encoding=options.input_encoding,
         white_balance=options.white_balance, calibration=options.calibration)
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
-                       skipped=skipped, noise=noise, uncertainty=uncertainty)
+                       skipped=skipped, noise=noise, uncertainty=uncertainty,
+                       motion=motion)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -276,6 +315,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     skipped = result.skipped.lines(stack.shape[2])
     if skipped:
         attributes["hdrio:skipped"] = "; ".join(skipped)
+    attributes.update(motion_attributes(result))
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
     if result.colour is not None:
@@ -310,6 +350,26 @@ def capture_attributes(stack: ExposureStack) -> dict[str, object]:
     for name in ("Make", "Model"):
         if first.get(name):
             attributes[name] = str(first[name])
+    return attributes
+
+
+def motion_attributes(result: MergeResult) -> dict[str, object]:
+    """``hdrio:align*`` and ``hdrio:deghost*``: the modes, each bracket's warp (text: the
+    3x3 matrix, reference pixels to bracket pixels), the deghosted fraction."""
+    options, motion = result.options, result.motion
+    attributes: dict[str, object] = {"hdrio:align": options.align,
+                                     "hdrio:deghost": options.deghost}
+    if motion.alignment is not None:
+        alignment = motion.alignment
+        attributes["hdrio:alignModel"] = alignment.model
+        attributes["hdrio:alignReference"] = str(result.stack.files[alignment.reference])
+        attributes["hdrio:alignWarped"] = int(motion.warped)
+        attributes["hdrio:alignTransforms"] = [
+            " ".join(f"{v:.6g}" for v in warp.reshape(-1)[:8])
+            for warp in alignment.transforms]
+        attributes["hdrio:alignUncovered"] = float(motion.uncovered)
+    if motion.deghosting is not None:
+        attributes["hdrio:deghostedFraction"] = float(motion.deghosting.fraction)
     return attributes
 
 
@@ -361,7 +421,7 @@ def merge_paths(paths: Sequence[str | Path], *,
                           stop_when_covered=response is not None
                           and "covered" in options.skips)
     read_time = time.perf_counter() - start
-    result = merge_stack(stack, options, progress, response)
+    result = merge_stack(stack, options, progress, response, owned=True)
     if response is not None:
         result.skipped.response_from = str(options.response_from)
     result.timings["read"] = read_time
@@ -426,6 +486,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     start = time.perf_counter()
     say(f"writing {output}")
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
+    if options.motion_layer and result.motion.deghosting is not None:
+        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
                                            observe=observe, layers=layers)

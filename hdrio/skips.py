@@ -1,6 +1,6 @@
 """Skipping the work a scene does not need, and saying what was skipped.
 
-Five skips, each on by default, each reported in ``hdrio merge``'s summary, each with a
+Six skips, each on by default, each reported in ``hdrio merge``'s summary, each with a
 row in ``benchmarks/speed`` (section ``skips``) and a test that it leaves the result
 unchanged, or within a stated tolerance:
 
@@ -23,6 +23,10 @@ unchanged, or within a stated tolerance:
 ``early-stop``
     The merge kernel never reads the rows of a bracket, or of any longer one, once a
     shorter bracket's row is saturated everywhere (``hdrio.merge.kernel``).
+``warp``
+    ``--align auto`` resamples no bracket when a sparse check finds every one within
+    0.1 px of the reference (``hdrio.align.quick``, docs/motion.md); turned off, the
+    full registration runs and the brackets are always warped.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-SKIPS = ("brackets", "response", "covered", "channels", "early-stop")
+SKIPS = ("brackets", "response", "covered", "channels", "early-stop", "warp")
 
 WELL_EXPOSED = (0.05, 0.95)
 """Code values strictly inside these fractions of the range are well exposed."""
@@ -95,6 +99,8 @@ class SkipReport:
     """Distinct channels solved (fewer than the channels when some were identical)."""
     early_stop_fraction: float = 0.0
     """Fraction of pixel-brackets the merge kernel never read."""
+    warp: bool = False
+    """``--align auto`` measured every bracket within 0.1 px and did not resample."""
 
     def lines(self, channels: int) -> list[str]:
         said = []
@@ -107,6 +113,8 @@ class SkipReport:
         if self.channels_solved is not None and self.channels_solved < channels:
             said.append(f"{channels - self.channels_solved} of {channels} channel solves "
                         "(identical channels)")
+        if self.warp:
+            said.append("alignment warp (every bracket within 0.1 px of the reference)")
         if self.early_stop_fraction > 0:
             said.append(f"{100 * self.early_stop_fraction:.1f} % of the merge "
                         "(rows saturated in a shorter bracket)")

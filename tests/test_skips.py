@@ -194,4 +194,4 @@ def test_summary_reports_the_skips_and_no_skip_all_turns_them_off(tmp_path, caps
     code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
                            "-o", tmp_path / "b.exr", "-q", "--no-skip", "all")
     assert code == 0 and "skipped:" not in out
-    assert set(SKIPS) == {"brackets", "response", "covered", "channels", "early-stop"}
+    assert set(SKIPS) == {"brackets", "response", "covered", "channels", "early-stop", "warp"}

@@ -23,7 +23,7 @@ from benchmarks.speed.scene import (
 )
 from benchmarks.timing import measure_alternately
 from hdrio.merge.debevec1997 import merge_brackets
-from hdrio.pipeline import MergeOptions, merge_files
+from hdrio.pipeline import MergeOptions, merge_files, merge_stack
 from hdrio.response import response_Debevec1997
 from hdrio.response.stored import read_response
 
@@ -89,6 +89,12 @@ def run(height: int, width: int, repeats: int) -> list[dict]:
     _pair(rows, "early-stop", "7 brackets, open sky over 40 % of the rows (merge only)",
           lambda: merge_brackets(sky, response)[0],
           lambda: merge_brackets(sky, response, early_stop=False)[0], repeats)
+    sky = None
+    still, _ = bracket_stack(height, width, 7)
+    _pair(rows, "warp", "7 still brackets, --align auto (merge_stack, response given)",
+          lambda: merge_stack(still, MergeOptions(deghost="off"), response=response),
+          lambda: merge_stack(still, MergeOptions(deghost="off", no_skip=("warp",)),
+                              response=response), repeats)
     return rows
 
 

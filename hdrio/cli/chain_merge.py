@@ -103,6 +103,8 @@ def _merge(chain: Chain, domain: str | None) -> None:
     chain.brackets = []
     chain.last_merge = result
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
+    if options.motion_layer and result.motion.deghosting is not None:
+        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     chain.images.append(Image(output_pixels(result), exr_attributes(result),
                               f"merge of {result.stack.count} brackets", statistics=result,
                               layers=layers))

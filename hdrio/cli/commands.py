@@ -146,6 +146,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        *motion_lines(result),
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
         f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"
@@ -155,6 +156,24 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     if preview is not None:
         lines.append(f"preview:   {preview} ({tonemap}) in {times['preview']:.2f} s")
     return "\n".join(lines)
+
+
+def motion_lines(result: MergeResult) -> list[str]:
+    """The summary's ``align:`` and ``deghost:`` lines."""
+    motion, lines = result.motion, []
+    if motion.alignment is not None:
+        files = tuple(Path(name).name for name in result.stack.files)
+        said = "warped" if motion.warped else "not warped"
+        lines.append(f"align:     {motion.alignment.model} to "
+                     f"{files[motion.alignment.reference]}, {said}, "
+                     f"{result.timings.get('align', 0):.2f} s"
+                     + (f"; {100 * motion.uncovered:.1f} % of pixels not covered by every "
+                        "bracket" if motion.uncovered else ""))
+        lines += [f"           {line}" for line in motion.alignment.describe(files)]
+    if motion.deghosting is not None:
+        lines.append(f"deghost:   {100 * motion.deghosting.fraction:.2f} % of pixels had a "
+                     f"bracket dropped for motion, {result.timings.get('deghost', 0):.2f} s")
+    return lines
 
 
 def add_info(sub) -> None:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.cli.values import (
     choice,
     encoding_name,
@@ -148,6 +149,16 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            help="merge estimator: inverse-variance (default: weights from the stack's own "
                 "noise model), Poisson, log (the tutorial's) or linear; in a chain, "
                 "--merge's own optional argument"),
+    Option("--align", ("MODE",), "align", choice(*ALIGN_MODES), example=("off",),
+           help="register the brackets to the best-exposed one: auto (measure; warp only if "
+                "some bracket moved more than 0.1 px), off, or a model to warp with "
+                "(default auto; docs/motion.md)"),
+    Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("off",),
+           help="drop observations that disagree with the reference bracket (moving "
+                "people, leaves): auto or off (default auto)"),
+    Option("--motion-layer", (), "motion_layer", flag, example=(),
+           help="also write the deghosting mask as the EXR channel motion.Y (1: some "
+                "bracket dropped for motion)"),
     Option("--uncertainty", (), "uncertainty", flag, example=(),
            help="also write each pixel's predicted relative standard deviation (from the "
                 "noise model) as the EXR layer 'uncertainty', summarised by hdrio check"),

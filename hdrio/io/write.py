@@ -168,12 +168,13 @@ def _publish(temp: Path, path: Path) -> None:
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
                 band: Callable[[np.ndarray], np.ndarray] | None = None,
-                channel_names: list[str] | None = None) -> Path:
+                channel_names: Sequence[str] | None = None) -> Path:
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
     Rows go out in bands of 64, each through ``band`` first when given (a conversion
-    applied band by band needs no full-size copy of the image). One channel is named
-    ``Y`` (OpenEXR's luminance), three ``R, G, B``.
+    applied band by band needs no full-size copy of the image). ``pixels`` may be any
+    object with ``shape`` whose row slices are arrays. ``channel_names`` replaces
+    OpenImageIO's defaults; one channel is named ``Y`` (OpenEXR's luminance).
     """
     import OpenImageIO as oiio
 
@@ -209,6 +210,20 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
     return path
 
 
+class _WithLayers:
+    """The image's rows with extra ``(H, W, k)`` layers appended, a band at a time (no
+    full-size copy)."""
+
+    def __init__(self, rgb: np.ndarray, layers: list[np.ndarray]) -> None:
+        self.rgb, self.layers = rgb, layers
+        self.shape = (*rgb.shape[:2], rgb.shape[2] + sum(layer.shape[2] for layer in layers))
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        return np.concatenate([np.asarray(self.rgb[rows], np.float32)]
+                              + [np.asarray(layer[rows], np.float32) for layer in self.layers],
+                              axis=-1)
+
+
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
               pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
               layers: Mapping[str, np.ndarray] | None = None,
@@ -235,22 +250,25 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         layer = layer if layer.ndim == 3 else layer[..., None]
         planes.append(layer)
         names += [f"{name}.{c}" for c in ("RGB" if layer.shape[-1] == 3 else "Y")]
-    pixels = rgb if len(planes) == 1 else np.concatenate(
-        [np.asarray(p, dtype=np.float32) for p in planes], axis=-1)
 
     def band(rows: np.ndarray) -> np.ndarray:
-        rows = np.array(rows, dtype=np.float32)  # a copy when layered: scaled in place
+        rows = np.array(rows, dtype=np.float32)
+        colour = rows[..., :own]
         if factor != 1:
-            rows[..., :own] *= factor
-        if pixel_type == "half":
-            rows = np.clip(rows, HALF_MIN_POSITIVE, HALF_MAX).astype(np.float16)
+            colour *= factor
+        if pixel_type == "half":  # the image's own channels stay positive; layers keep 0
+            np.clip(colour, HALF_MIN_POSITIVE, HALF_MAX, out=colour)
+            np.clip(rows[..., own:], -HALF_MAX, HALF_MAX, out=rows[..., own:])
+            rows = rows.astype(np.float16)
         if observe is not None:
             observe(rows[..., :own])
         return rows
 
     attributes = {"compression": compression, **(attributes or {})}
-    return write_image(path, pixels, pixel_type, attributes, band,
-                       channel_names=names if len(planes) > 1 else None)
+    if not layers:
+        return write_image(path, rgb, pixel_type, attributes, band)
+    return write_image(path, _WithLayers(rgb, planes[1:]), pixel_type, attributes, band,
+                       channel_names=names)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:

@@ -1,0 +1,13 @@
+"""Registration of brackets and deghosting: each bracket in, a transform and a mask out.
+
+Modules, one per method: :mod:`~hdrio.align.ward2003` (median threshold bitmaps),
+:mod:`~hdrio.align.lucaskanade` (sub-pixel refinement), :mod:`~hdrio.align.warp`
+(resampling codes), :mod:`~hdrio.align.registration` (the stack's alignment),
+:mod:`~hdrio.align.deghost` (consistency masks). ``hdrio.pipeline`` calls them.
+"""
+
+ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")
+"""``--align``: ``auto`` measures and warps only brackets that moved; ``off``; or a model."""
+
+DEGHOST_MODES = ("auto", "off")
+"""``--deghost``."""

@@ -1,0 +1,123 @@
+"""Is anything moving? A sparse full-resolution check that lets ``--align auto`` skip the
+pyramid on a still stack.
+
+The strongest gradients of the reference are found on a strided sample (every
+:data:`STRIDE`-th row and column), then, at up to :data:`POINTS` of them, each bracket's
+linearised log radiance and the reference's full-resolution gradient are read (five
+pixels a point: the whole check reads a few hundred kilobytes, not the brackets). One
+Gauss-Newton step of translation + rotation from the identity, Huber-weighted, with a
+free offset, estimates each bracket's motion against its neighbour towards the
+reference; when every estimate moves the image's corners by less than :data:`STILL`
+pixels, the stack is still. Otherwise the full registration runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from hdrio.skips import well_exposed_codes
+
+STRIDE = 4
+POINTS = 20_000
+STILL = 0.05
+"""Pixels: half of ``--align auto``'s 0.1 px (one Gauss-Newton step from the identity
+is exact to first order only)."""
+
+
+@njit(cache=True, nogil=True)
+def _log_at(codes, linear, y, x, low, high):  # pragma: no cover - compiled
+    """``ln sum_c linear[c, z_c]`` at ``(y, x)`` and whether every channel is usable."""
+    total = 0.0
+    ok = True
+    for c in range(codes.shape[2]):
+        z = codes[y, x, c]
+        ok &= (z >= low) & (z <= high)
+        total += linear[c, z]
+    return np.log(max(total, 1e-30)), ok
+
+
+@njit(cache=True, nogil=True)
+def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no cover
+    """``ln sum_c linear[c, z_c]`` at each point, its central differences, and whether the
+    point and its four neighbours are well exposed in every channel."""
+    height, width = codes.shape[0], codes.shape[1]
+    for i in range(ys.size):
+        y, x = ys[i], xs[i]
+        if not (0 < y < height - 1 and 0 < x < width - 1):
+            good[i] = False
+            values[i] = gx[i] = gy[i] = 0.0
+            continue
+        centre, ok0 = _log_at(codes, linear, y, x, low, high)
+        down, ok1 = _log_at(codes, linear, y + 1, x, low, high)
+        up, ok2 = _log_at(codes, linear, y - 1, x, low, high)
+        right, ok3 = _log_at(codes, linear, y, x + 1, low, high)
+        left, ok4 = _log_at(codes, linear, y, x - 1, low, high)
+        good[i] = ok0 & ok1 & ok2 & ok3 & ok4
+        values[i] = centre
+        gy[i] = 0.5 * (down - up)
+        gx[i] = 0.5 * (right - left)
+
+
+def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample."""
+    grid = codes[STRIDE // 2::STRIDE, STRIDE // 2::STRIDE]
+    channels = np.arange(grid.shape[-1])
+    image = np.log(np.maximum(linear[channels, grid].sum(axis=-1), 1e-30))
+    gy, gx = np.gradient(image)
+    strength = (gx * gx + gy * gy).reshape(-1)
+    count = min(POINTS, strength.size)
+    index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
+    rows, cols = np.divmod(index, grid.shape[1])
+    return rows * STRIDE + STRIDE // 2, cols * STRIDE + STRIDE // 2
+
+
+def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int) -> bool:
+    """True when one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
+    its neighbour towards ``reference``.
+
+    Parameters
+    ----------
+    codes
+        ``(P, H, W, C)`` code values.
+    linear
+        ``(P, C, levels)``: ``f^-1(z) / dt_j``, relative radiance.
+    """
+    count, height, width, _ = codes.shape
+    low, high = well_exposed_codes(code_max)
+    ys, xs = _points(codes[reference], linear[reference])
+    n = ys.size
+    reads = {}
+    for j in range(count):
+        values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+        _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
+              good)
+        reads[j] = (values, gx, gy, good)
+    half = max(height, width) / 2.0
+    u = (xs - (width - 1) / 2.0) / half
+    v = (ys - (height - 1) / 2.0) / half
+    for j in range(count):
+        if j == reference:
+            continue
+        k = j + 1 if j < reference else j - 1
+        template, gx, gy, ok_k = reads[k]
+        values, _, _, ok_j = reads[j]
+        good = ok_k & ok_j
+        if np.count_nonzero(good) < 200:
+            return False  # too little in common to tell: measure properly
+        sd = np.stack([gx * half, gy * half, -v * gx * half + u * gy * half,
+                       np.ones(n)], axis=1)[good]
+        error = (values - template)[good]
+        error = error - np.median(error)
+        scale = 1.4826 * np.median(np.abs(error)) + 1e-6
+        weight = np.minimum(1.0, 1.345 * scale / (np.abs(error) + 1e-12))
+        weighted = sd * weight[:, None]
+        try:
+            delta = np.linalg.solve(weighted.T @ sd, weighted.T @ error)
+        except np.linalg.LinAlgError:
+            return False
+        # Corner motion of a shift (delta[0:2], normalised units) and rotation delta[2].
+        motion = half * (np.hypot(delta[0], delta[1]) + abs(delta[2]) * np.sqrt(2.0))
+        if motion >= STILL:
+            return False
+    return True

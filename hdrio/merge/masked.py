@@ -1,0 +1,107 @@
+"""Merging with per-pixel, per-bracket weights (deghosting, uncovered borders).
+
+The fused kernel (:mod:`hdrio.merge.kernel`) stays as it is and merges every pixel;
+this pass then re-merges only the pixels where some bracket's keep weight ``m_j`` is
+below 1, from the same tables (:func:`hdrio.merge.debevec1997.merge_tables`), and
+overwrites them:
+
+``sum = sum * (1 - m_j s_j) + m_j t_j(z_j)`` over the brackets, longest first,
+
+with ``s_j`` 1 where the code is saturated (the kernel's reset, so ``m_j = 1``
+everywhere gives the kernel's result) and ``t_j`` the table's term. A dropped bracket
+(``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
+object that clips says nothing about the scene behind it. Weights are given on a grid
+of cells and interpolated bilinearly between cell centres (the masks are feathered:
+no seam). A channel left with no weight takes the estimate of the most-kept bracket
+not saturated there.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.ndimage
+from numba import njit, prange
+
+from hdrio.merge.kernel import FLOAT32_MAX, FLOAT32_TINY, LOG_FLOAT32_MAX, LOG_FLOAT32_TINY
+
+
+@njit(cache=True, nogil=True)
+def _corner(position, size):  # pragma: no cover - compiled
+    f = position - 0.5
+    i0 = max(0, min(int(math.floor(f)), size - 1))
+    i1 = min(i0 + 1, size - 1)
+    w = min(max(f - i0, 0.0), 1.0)
+    return i0, i1, w
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def _remerge(codes, keep, touched, cell, terms, estimates, code_max, per_channel,
+             log_domain, out):  # pragma: no cover - compiled
+    count, height, width, channels = codes.shape
+    rows, cols = touched.shape
+    for cy in prange(rows):
+        m = np.empty(count)
+        for cx in range(cols):
+            if not touched[cy, cx]:
+                continue
+            for y in range(cy * cell, min(height, (cy + 1) * cell)):
+                y0, y1, wy = _corner((y + 0.5) / cell, rows)
+                for x in range(cx * cell, min(width, (cx + 1) * cell)):
+                    x0, x1, wx = _corner((x + 0.5) / cell, cols)
+                    for j in range(count):
+                        k = keep[j]
+                        m[j] = ((1.0 - wy) * ((1.0 - wx) * k[y0, x0] + wx * k[y0, x1])
+                                + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
+                    for c in range(channels):
+                        numerator = 0.0
+                        denominator = 0.0
+                        best = -1
+                        for j in range(count - 1, -1, -1):
+                            z = codes[j, y, x, c]
+                            saturated = z == code_max
+                            if not per_channel:
+                                for k in range(channels):
+                                    saturated |= codes[j, y, x, k] == code_max
+                            reset = 1.0 - m[j] * saturated
+                            numerator = numerator * reset + m[j] * terms[j, c, z].real
+                            denominator = denominator * reset + m[j] * terms[j, c, z].imag
+                            if not saturated and (best < 0 or m[j] > m[best]):
+                                best = j
+                        if denominator > 0.0:
+                            value = numerator / denominator
+                        else:
+                            j = best if best >= 0 else int(np.argmax(m))
+                            value = estimates[j, c, codes[j, y, x, c]]
+                        if log_domain:
+                            value = math.exp(min(max(value, LOG_FLOAT32_TINY), LOG_FLOAT32_MAX))
+                        out[y, x, c] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
+
+
+def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.ndarray,
+                   estimates: np.ndarray, code_max: int, per_channel: bool,
+                   log_domain: bool, radiance: np.ndarray) -> int:
+    """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
+    weight is below 1; returns how many cells were re-merged.
+
+    Parameters
+    ----------
+    codes
+        ``(P, H, W, C)`` code values, shortest exposure first.
+    keep
+        ``(P, rows, cols)`` weights in [0, 1] at cell centres ``(i + 0.5) * cell``.
+    terms, estimates
+        :func:`hdrio.merge.debevec1997.merge_tables`' tables, ``(P, C, levels)``.
+    per_channel, log_domain
+        The saturation policy (``channel``) and the merge domain (``log``).
+    """
+    low = keep.min(axis=0) < 1.0
+    if not low.any():
+        return 0
+    touched = scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
+    _remerge(codes, np.ascontiguousarray(keep, np.float64), touched, cell,
+             np.ascontiguousarray(terms, np.complex128),
+             np.ascontiguousarray(estimates, np.float64), code_max, per_channel,
+             log_domain, radiance)
+    return int(np.count_nonzero(touched))

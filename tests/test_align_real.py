@@ -1,0 +1,57 @@
+"""Alignment and deghosting on the real hand-held HDR Toolbox stacks (../shared/data)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hdrio.align.registration import estimate_alignment
+from hdrio.io.brackets import read_brackets
+from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
+
+
+def _stack(shared_data, name):
+    folder = shared_data("hdrtoolbox_stacks")
+    files = sorted(p for p in (folder / name).iterdir() if p.suffix.lower() == ".jpg")
+    return read_brackets(files, exposures_from=folder / "exposures.csv")
+
+
+def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkeypatch):
+    result = merge_stack(_stack(shared_data, "alignment"), MergeOptions())
+    motion = result.motion
+    assert motion.warped and max(motion.alignment.motion) > 10  # it was hand-held
+    # The residual: the same measurement (the strongest gradients: edges) on the aligned
+    # brackets, every estimate kept (not snapped to no motion when it fits no better).
+    # The issue's bound is 0.5 px; measured 0.03 and 0.10 px at the corners.
+    monkeypatch.setattr("hdrio.align.registration.IMPROVEMENT", float("inf"))
+    residual = estimate_alignment(result.stack, result.response)
+    assert max(residual.motion) < 0.5, residual.motion
+
+
+def test_walking_people_are_deghosted(shared_data):
+    result = merge_stack(_stack(shared_data, "ghost"), MergeOptions())
+    # People walk through the hall between the shots (docs/images/motion_ghost.jpg); the
+    # camera stood nearly still (0.3 px). Measured: 17.9 % of pixels deghosted.
+    assert max(result.motion.alignment.motion) < 1.0
+    assert 0.02 < result.motion.deghosting.fraction < 0.4
+    header = exr_attributes(result)
+    assert header["hdrio:deghostedFraction"] == pytest.approx(result.motion.deghosting.fraction)
+    assert header["hdrio:align"] == "auto" and len(header["hdrio:alignTransforms"]) == 3
+
+
+def test_readme_and_docs_examples(shared_data, tmp_path, capsys):
+    """README's and docs/motion.md's commands on the HDR Toolbox stacks."""
+    from tests.conftest import run_cli
+
+    folder = shared_data("hdrtoolbox_stacks")
+    sidecar = folder / "exposures.csv"
+    canal = sorted((folder / "alignment").glob("*.jpg"))
+    code, stdout, err = run_cli(capsys, "merge", *canal, "--exposures-from", sidecar,
+                                "-o", tmp_path / "canal.exr", "--preview",
+                                tmp_path / "canal.jpg")
+    assert code == 0, err
+    assert "align:     euclidean" in stdout and "warped" in stdout
+    hall = sorted((folder / "ghost").glob("*.JPG"))
+    code, stdout, err = run_cli(capsys, "merge", *hall, "--exposures-from", sidecar,
+                                "-o", tmp_path / "hall.exr", "--deghost", "auto")
+    assert code == 0, err
+    assert "deghost:" in stdout
