@@ -16,7 +16,7 @@ def _stack(shared_data, name):
 
 
 def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkeypatch):
-    result = merge_stack(_stack(shared_data, "alignment"), MergeOptions())
+    result = merge_stack(_stack(shared_data, "alignment"), MergeOptions(deghost="auto"))
     motion = result.motion
     assert motion.warped and max(motion.alignment.motion) > 10  # it was hand-held
     # The residual: the same measurement (the strongest gradients: edges) on the aligned
@@ -28,7 +28,7 @@ def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkey
 
 
 def test_walking_people_are_deghosted(shared_data):
-    result = merge_stack(_stack(shared_data, "ghost"), MergeOptions())
+    result = merge_stack(_stack(shared_data, "ghost"), MergeOptions(deghost="auto"))
     # People walk through the hall between the shots (docs/images/motion_ghost.jpg); the
     # camera stood nearly still (0.3 px). Measured: 17.9 % of pixels deghosted.
     assert max(result.motion.alignment.motion) < 1.0

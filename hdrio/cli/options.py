@@ -153,9 +153,9 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            help="register the brackets to the best-exposed one: auto (measure; warp only if "
                 "some bracket moved more than 0.1 px), off, or a model to warp with "
                 "(default auto; docs/motion.md)"),
-    Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("off",),
+    Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
-                "people, leaves): auto or off (default auto)"),
+                "people, leaves): auto or off (default off for now: see docs/motion.md)"),
     Option("--motion-layer", (), "motion_layer", flag, example=(),
            help="also write the deghosting mask as the EXR channel motion.Y (1: some "
                 "bracket dropped for motion)"),
