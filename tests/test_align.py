@@ -3,6 +3,8 @@ stack's error, codes kept meaningful by the warp, borders marked, the options wi
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,8 @@ from hdrio.synthetic import radiance_error, well_exposed
 
 H, W = 300, 400
 MARGIN = 24  # pixels: the cells a warped bracket does not fully cover (8-px cells + 10 px)
+
+AUTO = MergeOptions(align="auto", deghost="auto")  # both off by default
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +62,7 @@ def _inner(still: ExposureStack) -> np.ndarray:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_known_shifts_and_rotations_are_recovered(truth_scene, seed):
     moving, warps, reference = _moving(truth_scene, seed)
-    result = merge_stack(moving, MergeOptions(deghost="auto"))
+    result = merge_stack(moving, AUTO)
     alignment = result.motion.alignment
     assert alignment.reference == reference and result.motion.warped
     centre = np.array([(W - 1) / 2, (H - 1) / 2, 1.0])
@@ -77,7 +81,7 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     moving, _, _ = _moving(truth_scene, 0)
     inner = _inner(still)
     base = radiance_error(merge_stack(still, MergeOptions()).radiance, truth, inner)
-    aligned = radiance_error(merge_stack(moving, MergeOptions(deghost="auto")).radiance, truth, inner)
+    aligned = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
     unaligned = radiance_error(merge_stack(moving, MergeOptions(align="off", deghost="off"))
                                .radiance, truth, inner)
     # The median bound: 1.5x the still stack's (measured 1.36x with the default
@@ -94,7 +98,7 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     assert aligned["p99"] <= 6 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
-    log_aligned = radiance_error(merge_stack(moving, MergeOptions(merge="log", deghost="auto")).radiance,
+    log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
     assert log_aligned["p99"] <= 2.5 * log_base["p99"], (log_aligned, log_base)
     assert unaligned["median"] > 3 * base["median"]
@@ -102,7 +106,7 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
 
 def test_a_still_stack_is_left_alone(truth_scene):
     _, truth, _, still = truth_scene
-    auto = merge_stack(still, MergeOptions(deghost="auto"))
+    auto = merge_stack(still, AUTO)
     off = merge_stack(still, MergeOptions(align="off", deghost="off"))
     assert not auto.motion.warped and auto.skipped.warp
     assert "alignment warp" in " ".join(auto.skipped.lines(3))
@@ -207,7 +211,7 @@ def test_moving_objects_are_deghosted(truth_scene):
     ghosted = ExposureStack.from_arrays(render(views, exposures), exposures)
     mask = inside & well_exposed(still.codes, still.code_max)
     base = radiance_error(merge_stack(still, MergeOptions()).radiance, truth, mask)
-    result = merge_stack(ghosted, MergeOptions(deghost="auto"))
+    result = merge_stack(ghosted, AUTO)
     fixed = radiance_error(result.radiance, truth, mask)
     left = radiance_error(merge_stack(ghosted, MergeOptions(deghost="off")).radiance, truth,
                           mask)
@@ -248,7 +252,7 @@ def test_motion_layer_is_written_when_asked(brackets, out_dir, capsys):
     from tests.conftest import run_cli
 
     code, _, err = run_cli(capsys, "merge", *brackets, "-o", out_dir / "m.exr",
-                           "--motion-layer")
+                           "--deghost", "auto", "--motion-layer")
     assert code == 0, err
     image = oiio.ImageBuf(str(out_dir / "m.exr"))
     assert tuple(image.spec().channelnames) == ("R", "G", "B", "motion.Y")
@@ -277,3 +281,22 @@ def test_quick_check_tells_still_from_moving(truth_scene):
     views = [view(crop, np.eye(3) if j == reference else shifted) for j in range(3)]
     nudged = render(views, exposures)
     assert not looks_still(nudged, linear, 255, reference)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known bug, why --align is off by default: on the truth harness's still GoldenGate/dorf0 "
+    "stack at 250 px, auto warps the longest, nearly saturated bracket by (-31, -31) px"))
+def test_auto_leaves_a_still_truth_stack_unwarped(shared_data):
+    from benchmarks.truth.config import quick_config
+    from benchmarks.truth.curves import load_curve
+    from benchmarks.truth.methods import exposure_stack
+    from benchmarks.truth.scenes import read_scene
+    from benchmarks.truth.stacks import render_stack
+
+    shared_data("crf_database")
+    path = shared_data("openexr_scenes") / "GoldenGate.exr"
+    spec = next(s for s in quick_config({"GoldenGate": str(path)}).stacks
+                if s.curve == "dorf0")
+    stack = render_stack(spec, read_scene(path, 250), load_curve("dorf0"))
+    result = merge_stack(exposure_stack(stack), MergeOptions(align="auto"))
+    assert not result.motion.warped

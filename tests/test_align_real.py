@@ -8,6 +8,8 @@ from hdrio.align.registration import estimate_alignment
 from hdrio.io.brackets import read_brackets
 from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
 
+AUTO = MergeOptions(align="auto", deghost="auto")  # both off by default
+
 
 def _stack(shared_data, name):
     folder = shared_data("hdrtoolbox_stacks")
@@ -16,7 +18,7 @@ def _stack(shared_data, name):
 
 
 def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkeypatch):
-    result = merge_stack(_stack(shared_data, "alignment"), MergeOptions(deghost="auto"))
+    result = merge_stack(_stack(shared_data, "alignment"), AUTO)
     motion = result.motion
     assert motion.warped and max(motion.alignment.motion) > 10  # it was hand-held
     # The residual: the same measurement (the strongest gradients: edges) on the aligned
@@ -28,7 +30,7 @@ def test_hand_held_stack_is_registered_to_under_half_a_pixel(shared_data, monkey
 
 
 def test_walking_people_are_deghosted(shared_data):
-    result = merge_stack(_stack(shared_data, "ghost"), MergeOptions(deghost="auto"))
+    result = merge_stack(_stack(shared_data, "ghost"), AUTO)
     # People walk through the hall between the shots (docs/images/motion_ghost.jpg); the
     # camera stood nearly still (0.3 px). Measured: 17.9 % of pixels deghosted.
     assert max(result.motion.alignment.motion) < 1.0
@@ -47,11 +49,12 @@ def test_readme_and_docs_examples(shared_data, tmp_path, capsys):
     canal = sorted((folder / "alignment").glob("*.jpg"))
     code, stdout, err = run_cli(capsys, "merge", *canal, "--exposures-from", sidecar,
                                 "-o", tmp_path / "canal.exr", "--preview",
-                                tmp_path / "canal.jpg")
+                                tmp_path / "canal.jpg", "--align", "auto", "--deghost", "auto")
     assert code == 0, err
     assert "align:     euclidean" in stdout and "warped" in stdout
     hall = sorted((folder / "ghost").glob("*.JPG"))
     code, stdout, err = run_cli(capsys, "merge", *hall, "--exposures-from", sidecar,
-                                "-o", tmp_path / "hall.exr", "--deghost", "auto")
+                                "-o", tmp_path / "hall.exr", "--align", "auto",
+                                "--deghost", "auto")
     assert code == 0, err
     assert "deghost:" in stdout

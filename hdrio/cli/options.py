@@ -152,7 +152,7 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--align", ("MODE",), "align", choice(*ALIGN_MODES), example=("off",),
            help="register the brackets to the best-exposed one: auto (measure; warp only if "
                 "some bracket moved more than 0.1 px), off, or a model to warp with "
-                "(default auto; docs/motion.md)"),
+                "(default off for now: see docs/motion.md)"),
     Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
                 "people, leaves): auto or off (default off for now: see docs/motion.md)"),

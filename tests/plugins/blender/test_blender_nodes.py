@@ -24,7 +24,7 @@ from blender_scene import (  # noqa: E402
 import plugins.blender as addon  # noqa: E402
 from hdrio.io.brackets import read_brackets  # noqa: E402
 from hdrio.io.write import write_exr  # noqa: E402
-from hdrio.merge.debevec1997 import MERGE_METHODS  # noqa: E402
+from hdrio.merge import MERGE_METHODS, fit_noise  # noqa: E402
 from hdrio.pipeline import MergeOptions  # noqa: E402
 from hdrio.response.curve import CameraResponse  # noqa: E402
 from hdrio.synthetic import demo_scene  # noqa: E402
@@ -93,14 +93,15 @@ def test_merge_node_matches_hdrio_default_merge(registered, write_brackets, tmp_
     node = merge_node_with(tree, paths)
     # The tutorial's file names carry the exposures (bracket_1_16.png is 1/16 s).
     assert np.allclose(node.bracket_exposures(), exposures)
-    node.set_response(response_to_json(response, "gamma 2.2"))
+    stack = read_brackets(paths)
+    noise = fit_noise(stack.codes, stack.exposures, response)  # as a Solve stores it
+    node.set_response(response_to_json(response, "gamma 2.2", noise))
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "node.exr", size)
 
     # Whatever hdrio merge's defaults are: the node's tables are the core's.
     options = MergeOptions()
-    stack = read_brackets(paths)
     reference, _ = MERGE_METHODS[options.merge](stack, response, options.weighting,
-                                                options.saturation)
+                                                options.saturation, noise=noise)
     assert_matches_merge("known response", merged, reference)
 
     # Exposures are editable: twice every exposure time is half the radiance.
