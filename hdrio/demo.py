@@ -9,12 +9,12 @@ import numpy as np
 from hdrio.io.write import write_image
 from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.noise import QUANTISATION, NoiseModel
-from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import (
     DEFAULT_READ_NOISE,
     DEFAULT_SHOT_NOISE,
     demo_scene,
+    gamma_inverse_response,
     gamma_response,
     render_brackets,
 )
@@ -41,13 +41,8 @@ def write_demo_brackets(folder: str | Path, seed: int = 0) -> tuple[np.ndarray, 
 def oracle_radiance(stack: ExposureStack, gamma: float = 2.2) -> np.ndarray:
     """The noise-aware bound on the demo brackets: the inverse-variance merge given the true
     curve (``x^(1/gamma)``) and the renderer's true noise, in the response's units."""
-    code_max = stack.code_max
-    g = gamma * np.log(np.maximum(np.arange(code_max + 1), 0.5) / code_max)
-    middle = g[(code_max + 1) // 2]
-    table = np.repeat((g - middle)[:, None], stack.shape[2], axis=1)
-    response = CameraResponse(table, code_max, np.ones(table.shape, bool), method="truth")
-    unit = float(np.exp(middle))
     channels = stack.shape[2]
+    response, unit = gamma_inverse_response(stack.code_max, channels, gamma)
     noise = NoiseModel(np.full(channels, DEFAULT_SHOT_NOISE / unit),
                        np.full(channels, DEFAULT_READ_NOISE**2 / unit**2),
                        np.full(channels, QUANTISATION), "truth")

@@ -217,6 +217,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         before = fit_noise(stack.codes, stack.exposures, response, code_floor=code_floor)
     else:
         before = None
+    solved = response
     response = deghost_step(stack, response, motion, options.deghost, resolve, before)
     timings["deghost"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -236,7 +237,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     method = MERGE_METHODS.canonical(options.merge)
     noise = None
     if method in NOISE_AWARE or options.uncertainty:  # on the final (re-solved) response
-        noise = fit_noise(stack.codes, stack.exposures, response, code_floor=code_floor)
+        noise = before if before is not None and response is solved else fit_noise(
+            stack.codes, stack.exposures, response, code_floor=code_floor)
     announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](

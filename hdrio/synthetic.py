@@ -11,6 +11,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
+from hdrio.response.curve import CameraResponse
 from hdrio.skips import WELL_EXPOSED
 
 Response = Callable[[np.ndarray], np.ndarray]
@@ -19,6 +20,18 @@ Response = Callable[[np.ndarray], np.ndarray]
 def gamma_response(x: np.ndarray, gamma: float = 2.2) -> np.ndarray:
     """A known camera response for the demo: ``f(x) = x^(1/gamma)`` on [0, 1]."""
     return np.clip(x, 0.0, 1.0) ** (1.0 / gamma)
+
+
+def gamma_inverse_response(code_max: int = 255, channels: int = 3, gamma: float = 2.2
+                           ) -> tuple[CameraResponse, float]:
+    """The exact inverse of :func:`gamma_response` as a response table (``g(mid) = 0``;
+    code 0 taken at half a code so that ``g`` stays finite), and the sensor exposure at
+    the middle code: the unit of the table's relative ``X``."""
+    g = gamma * np.log(np.maximum(np.arange(code_max + 1), 0.5) / code_max)
+    middle = g[(code_max + 1) // 2]
+    table = np.repeat((g - middle)[:, None], channels, axis=1)
+    return (CameraResponse(table, code_max, np.ones(table.shape, bool), method="truth"),
+            float(np.exp(middle)))
 
 
 def tabulated_response(irradiance: np.ndarray, brightness: np.ndarray) -> Response:

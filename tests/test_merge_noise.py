@@ -33,6 +33,7 @@ from hdrio.synthetic import (
     DEFAULT_READ_NOISE,
     DEFAULT_SHOT_NOISE,
     demo_scene,
+    gamma_inverse_response,
     gamma_response,
     radiance_error,
     render_brackets,
@@ -45,12 +46,7 @@ SHOT, READ = DEFAULT_SHOT_NOISE, DEFAULT_READ_NOISE  # variance per unit X, read
 
 def gamma_truth(code_max: int = 255, channels: int = 3) -> tuple[CameraResponse, float]:
     """The true ``g`` of ``x^(1/2.2)`` with ``g(mid) = 0``, and the unit of its ``X``."""
-    z = np.maximum(np.arange(code_max + 1), 0.5) / code_max
-    g = 2.2 * np.log(z)
-    middle = g[(code_max + 1) // 2]
-    table = np.repeat((g - middle)[:, None], channels, axis=1)
-    return (CameraResponse(table, code_max, np.ones(table.shape, bool), method="truth"),
-            float(np.exp(middle)))
+    return gamma_inverse_response(code_max, channels)
 
 
 def true_noise(unit: float, channels: int = 3) -> NoiseModel:
