@@ -5,6 +5,10 @@ links to one rendered ladder, named by the file-name convention), merged to half
 the ``hdrio`` command as a user runs it, one fresh process per row:
 
 * ``--threads 1``: one worker, the sets one after another in the process (the baseline);
+* the same pinned to one core (``taskset -c 0``): one farm slot, the unit a farm
+  manager hands out; a worker's merge is itself multi-threaded, so one unpinned worker
+  already keeps most of two cores busy and a second worker can add only what it leaves
+  idle, while workers of one core each show how the engine scales with workers;
 * ``--threads 2``: a local pool of two worker processes;
 * ``--dask local:1`` and ``--dask local:2``: a Dask ``LocalCluster`` of one and two;
 * ``hdrio merge`` of one set: the single-run memory budget.
@@ -103,6 +107,9 @@ def main(argv: list[str] | None = None) -> int:
                 ("--group, 1 worker (--threads 1)", args.sets,
                  [*hdrio, "--threads", "1", str(shoot), "--group", "--merge",
                   "-o", f"{folder}/pool1/{{first_stem}}.exr"]),
+                ("--group, 1 worker pinned to one core (taskset -c 0)", args.sets,
+                 ["taskset", "-c", "0", *hdrio, "--threads", "1", str(shoot), "--group",
+                  "--merge", "-o", f"{folder}/pinned/{{first_stem}}.exr"]),
                 ("--group, local pool of 2 (--threads 2)", args.sets,
                  [*hdrio, "--threads", "2", str(shoot), "--group", "--merge",
                   "-o", f"{folder}/pool2/{{first_stem}}.exr"]),
@@ -127,7 +134,10 @@ def main(argv: list[str] | None = None) -> int:
         "pool 2 / 1 workers": by_name["--group, 1 worker (--threads 1)"]["seconds"]
         / by_name["--group, local pool of 2 (--threads 2)"]["seconds"],
         "dask 2 / 1 workers": by_name["--group --dask local:1"]["seconds"]
-        / by_name["--group --dask local:2"]["seconds"]}
+        / by_name["--group --dask local:2"]["seconds"],
+        "pool 2 workers / 1 worker on one core": by_name[
+            "--group, 1 worker pinned to one core (taskset -c 0)"]["seconds"]
+        / by_name["--group, local pool of 2 (--threads 2)"]["seconds"]}
     for name, ratio in ratios.items():
         print(f"throughput {name}: {ratio:.2f}x (target >= 1.6x)")
     document = {"cpus": os.cpu_count(), "sets": args.sets, "frames": args.frames,

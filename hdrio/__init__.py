@@ -1,8 +1,6 @@
 """hdrio: bracketed exposures to scene-linear OpenEXR, with colour management.
 
-Subpackages are imported here in dependency order, which documents the layering: the
-data model, I/O, weighting and response recovery, merging, tone mapping, then the
-pipeline that chains them. ``hdrio`` never imports ``bpy``, ``plugins`` or ``hdrio.cli``.
+``hdrio`` never imports ``bpy``, ``plugins`` or ``hdrio.cli``.
 """
 
 __version__ = "0.1.0"
@@ -14,17 +12,23 @@ import warnings  # noqa: E402
 warnings.filterwarnings("ignore", message='"Matplotlib" related API features are not '
                                           "available")
 
-from hdrio.errors import HdrioError, InputError, ResponseSolveError  # noqa: E402
-from hdrio.io import read_brackets, write_exr  # noqa: E402
-from hdrio.merge import MERGE_METHODS, WEIGHTING_METHODS, merge_brackets  # noqa: E402
-from hdrio.pipeline import MergeOptions, MergeResult, merge_files, merge_stack  # noqa: E402
-from hdrio.response import RESPONSE_METHODS, CameraResponse, response_Debevec1997  # noqa: E402
-from hdrio.stack import ExposureStack  # noqa: E402
-from hdrio.tonemap import TONEMAP_METHODS  # noqa: E402
+from hdrio.lazy import lazy_attributes  # noqa: E402
 
-__all__ = [
-    "MERGE_METHODS", "RESPONSE_METHODS", "TONEMAP_METHODS", "WEIGHTING_METHODS",
-    "CameraResponse", "ExposureStack", "HdrioError", "InputError", "MergeOptions",
-    "MergeResult", "ResponseSolveError", "merge_brackets", "merge_files", "merge_stack",
-    "read_brackets", "response_Debevec1997", "write_exr",
-]
+# Public names and their modules, in dependency order (the layering: the data model, I/O,
+# weighting and response recovery, merging, tone mapping, then the pipeline that chains
+# them). Each is imported on first use, so a command pays only for what it runs.
+_EXPORTS = {
+    "ExposureStack": "hdrio.stack",
+    "HdrioError": "hdrio.errors", "InputError": "hdrio.errors",
+    "ResponseSolveError": "hdrio.errors",
+    "read_brackets": "hdrio.io.brackets", "write_exr": "hdrio.io.write",
+    "RESPONSE_METHODS": "hdrio.response", "CameraResponse": "hdrio.response",
+    "response_Debevec1997": "hdrio.response",
+    "MERGE_METHODS": "hdrio.merge.estimators", "WEIGHTING_METHODS": "hdrio.merge.weighting",
+    "merge_brackets": "hdrio.merge.debevec1997",
+    "TONEMAP_METHODS": "hdrio.tonemap",
+    "MergeOptions": "hdrio.pipeline", "MergeResult": "hdrio.pipeline",
+    "merge_files": "hdrio.pipeline", "merge_stack": "hdrio.pipeline",
+}
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS)

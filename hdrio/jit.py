@@ -1,19 +1,29 @@
-"""Whether numba still has to compile a kernel (first run after install), to say so.
+"""The first run after install: saying that kernels compile, and compiling on two cores.
 
 Kernels compile on first use and are cached on disk (``cache=True``); a later process
 loads them in milliseconds. The first run of a job can spend most of its time compiling,
-so the pipeline announces it: "compiling kernels (first run only)".
+so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
+thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
+(:func:`compile_ahead`) that compile the kernels the job needs later (the merge's, the
+preview's tone mapping, the report's check) while this one reads the brackets and solves
+the response; it waits for them before those stages and then loads those kernels from
+the cache.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+
+import numpy as np
 
 STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
-    "merge": ("hdrio.merge.kernel:merge_kernel",),
+    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
+    "check": ("hdrio.cms.check_kernel:count_rows",),
 }
 """The kernel whose cache stands for each stage's (they compile together)."""
 
@@ -39,7 +49,88 @@ def is_cached(dispatcher) -> bool:
 
 def announce(say: Callable[[str], None], stage: str) -> None:
     """Say "compiling kernels (first run only): STAGE" when ``stage``'s kernels (a key of
-    :data:`STAGES`) are not in the cache yet; the progress log times each stage."""
-    if not all(is_cached(_dispatcher(name)) for name in STAGES[stage]):
+    :data:`STAGES`) are not in the cache yet (after waiting for :func:`compile_ahead`'s
+    process of that stage); the progress log times each stage."""
+    _wait_for(stage)
+    if not is_stage_cached(stage):
         say(f"compiling kernels (first run only): {stage}; later runs load them from the "
             "cache")
+
+
+def _compile_merge() -> None:
+    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's)."""
+    from hdrio.merge.debevec1997 import merge_brackets
+    from hdrio.stack import ExposureStack
+    from hdrio.synthetic import gamma_inverse_response
+
+    codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
+    stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
+    merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
+
+
+def _compile_preview(operator: str) -> None:
+    from hdrio.pipeline import render_preview
+
+    render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
+
+
+def _compile_check() -> None:
+    from hdrio.cms.checks import StreamingCheck
+
+    StreamingCheck().add(np.full((2, 2, 3), 0.5, np.float16))
+
+
+_pending: dict[str, subprocess.Popen] = {}
+"""Processes of :func:`compile_ahead` by the stage they compile for."""
+
+
+def compile_ahead(preview: str | None, check: bool, merge: bool) -> None:
+    """On a first run, start processes compiling kernels into the disk cache: the merge
+    kernel of 8-bit RGB brackets when ``merge``; the ``preview`` operator's (a
+    ``TONEMAP_METHODS`` name, or None) and the check's (when ``check``). Nothing when
+    they are cached already or this process may use one CPU only. :func:`announce` of a
+    stage waits for its process first."""
+    from hdrio.parallel import threads
+
+    if threads() < 2:
+        return
+    jobs = {("merge",): ["merge"] if merge and not is_stage_cached("merge") else [],
+            ("preview", "check"): (
+                [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])
+            + (["check"] if check and not is_stage_cached("check") else [])}
+    for stages, names in jobs.items():
+        if names:
+            process = subprocess.Popen([sys.executable, "-m", "hdrio.jit", *names],
+                                       stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                       stderr=subprocess.DEVNULL)
+            _pending.update(dict.fromkeys(stages, process))
+
+
+def _wait_for(stage: str) -> None:
+    """Wait until :func:`compile_ahead`'s process for ``stage`` is done (its kernels are
+    then in the cache; if it failed, they simply compile here on first use)."""
+    process = _pending.pop(stage, None)
+    if process is not None:
+        process.wait()
+
+
+def is_stage_cached(stage: str) -> bool:
+    """True when every kernel standing for ``stage`` (a key of :data:`STAGES`) is cached."""
+    return all(is_cached(_dispatcher(name)) for name in STAGES[stage])
+
+
+def main(argv: Sequence[str]) -> int:
+    """``python -m hdrio.jit merge preview=OPERATOR check``: compile those kernels."""
+    for stage in argv:
+        name, _, value = stage.partition("=")
+        if name == "merge":
+            _compile_merge()
+        elif name == "preview":
+            _compile_preview(value)
+        elif name == "check":
+            _compile_check()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

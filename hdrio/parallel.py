@@ -1,10 +1,14 @@
-"""How many threads hdrio's kernels use, and one way to spread work over them."""
+"""How many threads hdrio's kernels use, and ways to spread work over them."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+_DONE = object()  # read_ahead's end marker
 
 
 def threads() -> int:
@@ -35,3 +39,17 @@ def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
                    for start, stop in zip(bounds[:-1], bounds[1:])]
         for future in futures:
             future.result()
+
+
+def read_ahead(items: Iterator[T]) -> Iterator[T]:
+    """``items``, with the next one produced on a second thread while the caller works
+    on this one (a decoder that releases the GIL, such as OpenImageIO's, then overlaps
+    with the caller's kernels). One item ahead at most: memory stays at two items."""
+    if threads() == 1:
+        yield from items
+        return
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="hdrio-read") as pool:
+        upcoming = pool.submit(next, items, _DONE)
+        while (item := upcoming.result()) is not _DONE:
+            upcoming = pool.submit(next, items, _DONE)
+            yield item

@@ -13,19 +13,19 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio import __version__
+from hdrio import __version__, jit
 from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
-from hdrio.errors import ResponseSolveError
+from hdrio.errors import HdrioError, ResponseSolveError
 from hdrio.io.brackets import read_brackets
+from hdrio.io.brackets import read_header as read_bracket_header
 from hdrio.io.paths import check_inputs, check_outputs
-from hdrio.io.raw import is_raw_stack, xyz_to_working
+from hdrio.io.raw import is_raw, is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
-from hdrio.jit import announce
 from hdrio.merge.debevec1997 import MergeStatistics
 from hdrio.merge.estimators import (
     MERGE_METHODS,
@@ -178,7 +178,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     else:
         method = "linear" if is_raw_stack(stack) else options.response
         if method != "linear":
-            announce(say, "response")
+            jit.announce(say, "response")
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
 
@@ -239,7 +239,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     if method in NOISE_AWARE or options.uncertainty:  # on the final (re-solved) response
         noise = before if before is not None and response is solved else fit_noise(
             stack.codes, stack.exposures, response, code_floor=code_floor)
-    announce(say, "merge")
+    jit.announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](
         merged, response, options.weighting, options.saturation,
@@ -469,6 +469,18 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
     return extra
 
 
+def _eight_bit_rgb(paths: Sequence[str | Path]) -> bool:
+    """Whether the first bracket is 8-bit RGB (its merge kernel is the pair-table path);
+    False when its header cannot be read (reading it properly then says why)."""
+    if not paths or is_raw(paths[0]):
+        return False
+    try:
+        header = read_bracket_header(paths[0])
+    except HdrioError:
+        return False
+    return header.code_max == 255 and header.channels == 3
+
+
 def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 preview: str | Path | None = None, tonemap: str = "reinhard-global",
                 exposures: Sequence[float | str] | None = None,
@@ -478,19 +490,30 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 read_progress: Callable[[int, int, str], None] | None = None,
                 display_view: tuple[str, str] | None = None,
                 observe: Callable[[np.ndarray], None] | None = None,
-                tonemap_parameters: dict[str, float] | None = None) -> MergeResult:
+                tonemap_parameters: dict[str, float] | None = None,
+                compile_ahead: bool = False) -> MergeResult:
     """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
 
     ``display_view``: render the preview through that OCIO display and view instead of
     the ``tonemap`` operator (with ``tonemap_parameters``). ``observe`` sees each band of
-    the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`).
+    the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`). ``compile_ahead``:
+    on a first run, compile the preview's and the check's kernels in a second process
+    meanwhile (:func:`hdrio.jit.compile_ahead`; for a command run as ``python``, not
+    from inside another application).
     """
     say = progress or (lambda message: None)
     # Fail before reading: outputs named well, in folders that take a new file.
     check_outputs([(output, {".exr"}), *([(preview, None)] if preview is not None else [])],
                   paths)
+    tonemapped = (preview is not None and display_view is None
+                  and not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"))
+    if compile_ahead:
+        jit.compile_ahead(tonemap if tonemapped else None, observe is not None,
+                          merge=options.saturation == "channel" and _eight_bit_rgb(paths))
     result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
                          options=options, progress=progress, read_progress=read_progress)
+    if observe is not None:
+        jit.announce(say, "check")
     start = time.perf_counter()
     say(f"writing {output}")
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
@@ -509,7 +532,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 colourspace=result.options.colourspace, config=options.ocio_config)
         else:
             if not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"):
-                announce(say, "preview")
+                jit.announce(say, "preview")
             say(f"tone mapping preview ({tonemap})")
             pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
                                     **(tonemap_parameters or {}))

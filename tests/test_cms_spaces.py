@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hdrio.cms import spaces
+from hdrio.cms.luminance import KNOWN_CHROMATICITIES, normalised_primary_matrix
 from hdrio.errors import HdrioError
 from hdrio.imageops import read_image
 from hdrio.io.header import read_header
@@ -51,6 +52,19 @@ def test_chromaticities_are_colour_sciences(name, colour_science):
     space = colour.RGB_COLOURSPACES[colour_science]
     expected = [*np.ravel(space.primaries), *space.whitepoint]
     assert spaces.chromaticities(name) == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(KNOWN_CHROMATICITIES))
+def test_known_chromaticities_and_matrices_are_colour_sciences(name):
+    # hdrio keeps these so that a merge or a check never imports colour-science (1-2 s);
+    # they must be its values exactly, and the hand-written normalised primary matrix
+    # its matrix to float64 rounding (1e-12).
+    space = colour.RGB_COLOURSPACES[name]
+    assert KNOWN_CHROMATICITIES[name] == tuple(
+        float(v) for v in (*np.ravel(space.primaries), *space.whitepoint))
+    np.testing.assert_allclose(
+        normalised_primary_matrix(KNOWN_CHROMATICITIES[name]),
+        colour.normalised_primary_matrix(space.primaries, space.whitepoint), atol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["ACEScg", "ACES2065-1"])

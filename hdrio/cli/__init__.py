@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Sequence
 
 from hdrio import __version__
-from hdrio.cli import colour, commands
+from hdrio.cli import colour
 from hdrio.errors import HdrioError
 
 # colour-science warns at import when Matplotlib is absent; only its plotting needs it
@@ -29,16 +29,25 @@ EXIT_INTERRUPTED, EXIT_BROKEN_PIPE = 130, 141
 SUBCOMMANDS = frozenset({"merge", "info", "demo", "check", "export-response"})
 
 
-def build_parser() -> argparse.ArgumentParser:
+# Commands whose parser and work need no merge machinery (imported only when used).
+_LIGHT_COMMANDS = frozenset({"check", "export-response"})
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand; of ``command``'s alone when it is one of
+    :data:`_LIGHT_COMMANDS` (``hdrio check`` then never imports the merge)."""
     parser = argparse.ArgumentParser(
         prog="hdrio",
         description="Merge bracketed exposures into scene-linear OpenEXR, with previews.",
     )
     parser.add_argument("--version", action="version", version=f"hdrio {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    commands.add_merge(sub)
-    commands.add_info(sub)
-    commands.add_demo(sub)
+    if command not in _LIGHT_COMMANDS:
+        from hdrio.cli import commands
+
+        commands.add_merge(sub)
+        commands.add_info(sub)
+        commands.add_demo(sub)
     colour.add_check(sub)
     colour.add_export_response(sub)
     return parser
@@ -95,7 +104,7 @@ def _run(argv: list[str]) -> int:
         from hdrio.cli import chain
 
         return chain.main(argv)
-    parser = build_parser()
+    parser = build_parser(argv[0])
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:

@@ -100,7 +100,7 @@ def run_merge(args: argparse.Namespace) -> int:
         tonemap_parameters=parameters, exposures=settings.get("exposures"),
         exposures_from=settings.get("exposures_from"), options=options,
         pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
-        display_view=display_view, observe=check.add,
+        display_view=display_view, observe=check.add, compile_ahead=True,
     )
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
@@ -241,7 +241,8 @@ def run_demo(args: argparse.Namespace) -> int:
     options = MergeOptions()
     check = merge_check(options)
     result = merge_files(files, output, preview=preview, progress=progress.step,
-                         read_progress=progress.bar, options=options, observe=check.add)
+                         read_progress=progress.bar, options=options, observe=check.add,
+                         compile_ahead=True)
     print(summary(result, output, preview, "reinhard-global", "half",
                   merge_report(check, result, output)))
     mask = well_exposed(result.stack.codes, result.stack.code_max)

@@ -23,13 +23,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hdrio.cms.luminance import luminance
 from hdrio.errors import HdrioError, InputError
-from hdrio.response.curve import CameraResponse
-from hdrio.stack import ExposureStack
+
+if TYPE_CHECKING:  # annotations only: importing the response solver costs a second
+    from hdrio.response.curve import CameraResponse
+    from hdrio.stack import ExposureStack
 
 DEFAULT_K = 12.5
 REFERENCE_CODE_8BIT = 118  # ISO 12232 standard output sensitivity: sRGB 18 % grey

@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.calibration import Region
+from hdrio.cms.luminance import normalised_primary_matrix
 from hdrio.errors import HdrioError, InputError, library_message
+from hdrio.parallel import read_ahead
 
 REC709_D65 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLORCHECKER = "ColorChecker24 - After November 2014"
@@ -43,14 +45,6 @@ class CheckReport:
     percentile and the fraction of pixels above 10 % (relative standard deviation)."""
     source: str = ""
     notes: list[str] = field(default_factory=list)
-
-
-def rgb_to_xyz_matrix(chromaticities: tuple[float, ...]) -> np.ndarray:
-    """The normalised primary matrix of an OpenEXR ``chromaticities`` (8 floats)."""
-    import colour
-
-    values = np.asarray(chromaticities, dtype=np.float64)
-    return colour.normalised_primary_matrix(values[:6].reshape(3, 2), values[6:])
 
 
 def dynamic_range_stops(Y: np.ndarray) -> tuple[float, float]:
@@ -99,7 +93,7 @@ def chart_delta_E(rgb: np.ndarray, region: Region, chromaticities: tuple[float, 
     """
     import colour
 
-    measured = chart_patches(rgb, region) @ rgb_to_xyz_matrix(chromaticities).T
+    measured = chart_patches(rgb, region) @ normalised_primary_matrix(chromaticities).T
     chart = colour.CCS_COLOURCHECKERS[COLORCHECKER]
     white = np.asarray(chromaticities[6:8], dtype=np.float64)
     reference = colour.chromatic_adaptation(
@@ -129,7 +123,7 @@ def check_pixels(rgb: np.ndarray, chromaticities: tuple[float, ...] = REC709_D65
     if rgb.ndim != 3 or rgb.shape[-1] != 3:
         raise HdrioError(f"checks need RGB pixels, got shape {rgb.shape}")
     finite = np.all(np.isfinite(rgb), axis=-1)
-    to_xyz = rgb_to_xyz_matrix(chromaticities)
+    to_xyz = normalised_primary_matrix(chromaticities)
     Y = rgb @ to_xyz[1]
     full, robust = dynamic_range_stops(Y[finite])
     values = Y[finite]
@@ -166,7 +160,7 @@ def _gamut_matrix(chromaticities: tuple[float, ...], gamut: str | None) -> np.nd
     space = colour.RGB_COLOURSPACES[gamut]
     return space.matrix_XYZ_to_RGB @ colour.adaptation.matrix_chromatic_adaptation_VonKries(
         colour.xy_to_XYZ(np.asarray(chromaticities[6:8])),
-        colour.xy_to_XYZ(space.whitepoint), transform="Bradford") @ rgb_to_xyz_matrix(
+        colour.xy_to_XYZ(space.whitepoint), transform="Bradford") @ normalised_primary_matrix(
         chromaticities)
 
 
@@ -192,7 +186,7 @@ class StreamingCheck:
                  gamut: str | None = None) -> None:
         self.chromaticities = tuple(float(v) for v in chromaticities)
         self.units, self.clipped_fraction, self.gamut = units, clipped_fraction, gamut
-        self._weights = rgb_to_xyz_matrix(self.chromaticities)[1].astype(np.float32)
+        self._weights = normalised_primary_matrix(self.chromaticities)[1].astype(np.float32)
         self._to_gamut = _gamut_matrix(self.chromaticities, gamut)
         self._counts = np.zeros(_BINS, dtype=np.int64)
         self.pixels = self.negative = self.non_finite = self.outside = 0
@@ -212,28 +206,31 @@ class StreamingCheck:
                    **kwargs)
 
     def add(self, rows: np.ndarray) -> None:
-        """Count one band ``(rows, W, C)`` of the image."""
+        """Count one band ``(rows, W, C)`` of the image (half or float32 kept as they
+        are; other dtypes are converted to float32)."""
+        from hdrio.cms import check_kernel
+
         rows = np.asarray(rows)
         if rows.shape[-1] == 1:  # greyscale: Y as equal R, G, B
             rows = np.repeat(rows, 3, axis=-1)
-        rgb = rows[..., :3].astype(np.float32, copy=False).reshape(-1, 3)
-        Y = rgb @ self._weights
-        # Y is finite exactly when every channel is (the weights are positive).
-        finite = np.isfinite(Y)
-        lowest = _channel_minimum(rgb)
-        self.pixels += Y.size
-        self.non_finite += int(Y.size - np.count_nonzero(finite))
-        self.negative += int(np.count_nonzero(lowest < 0))
-        if self._to_gamut is not None:
-            lowest = _channel_minimum(rgb @ self._to_gamut.T.astype(np.float32))
-        # Outside: a channel below -1e-6 of the pixel's luminance (float rounding is not).
-        self.outside += int(np.count_nonzero((lowest < -1e-6 * np.abs(Y)) & finite))
-        positive = Y[(Y > 0) & finite]
-        if positive.size:
-            self._low = min(self._low, float(positive.min()))
-            self._high = max(self._high, float(positive.max()))
-            self._counts += np.bincount(positive.view(np.int32) >> _BIN_SHIFT,
-                                        minlength=_BINS)
+        if rows.dtype not in (np.float16, np.float32):
+            rows = rows.astype(np.float32)
+        rows = np.ascontiguousarray(rows).reshape(-1, rows.shape[-1])
+        extremes = np.array([np.inf, 0.0], np.float32)
+        use_gamut = self._to_gamut is not None
+        to_gamut = (self._to_gamut if use_gamut else np.eye(3)).astype(np.float32)
+        half = rows.dtype == np.float16
+        bad, negative, outside = check_kernel.count_rows(
+            rows.view(np.uint16) if half else rows,
+            check_kernel.HALF_TABLE, self._weights, to_gamut,
+            use_gamut, self._counts, _BIN_SHIFT, extremes)
+        self.pixels += rows.shape[0]
+        self.non_finite += int(bad)
+        self.negative += int(negative)
+        self.outside += int(outside)
+        if extremes[1] > 0:
+            self._low = min(self._low, float(extremes[0]))
+            self._high = max(self._high, float(extremes[1]))
 
     def _order_statistic(self, cumulative: np.ndarray, k: int) -> float:
         """The ``k``-th smallest luminance (0-based): its bin's centre, within the
@@ -275,20 +272,14 @@ class StreamingCheck:
             clipped_fraction=clipped, source=source)
 
 
-def _channel_minimum(rgb: np.ndarray) -> np.ndarray:
-    """Per-pixel minimum of ``(N, 3)`` values (column by column: ``min(axis=1)`` over
-    three values is several times slower)."""
-    return np.minimum(np.minimum(rgb[:, 0], rgb[:, 1]), rgb[:, 2])
-
-
-_ROWS_PER_READ = 128
+_ROWS_PER_READ = 512
 
 
 def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | None = None
               ) -> CheckReport:
     """Check ``path`` (RGB channels, any EXR) band by band with :class:`StreamingCheck`.
 
-    Memory stays at a band of 128 rows (plus the chart region's rows when given).
+    Memory stays at two bands of 512 rows (plus the chart region's rows when given).
     """
     import OpenImageIO as oiio
 
@@ -311,16 +302,22 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
         samples = []  # every 4th row and column of the uncertainty layer
         check = StreamingCheck.for_attributes(header, gamut=gamut)
         delta_E = None
-        for top in range(spec.y, spec.y + spec.height, _ROWS_PER_READ):
-            bottom = min(top + _ROWS_PER_READ, spec.y + spec.height)
-            # Half files are read as half (half the bytes to convert); add() widens a band.
-            rows = image.read_scanlines(0, 0, top, bottom, 0, 0, spec.nchannels,
-                                        "half" if str(spec.format) == "half" else "float")
-            if rows is None or image.has_error:
-                raise InputError(path, f"cannot decode pixels "
-                                       f"({library_message(image.geterror)})")
-            rows = np.asarray(rows).reshape(bottom - top, spec.width, -1)
-            check.add(rows[..., order])
+        # Half files are read as half (half the bytes to convert); add() decodes them.
+        pixel_type = "half" if str(spec.format) == "half" else "float"
+
+        def bands():
+            for top in range(spec.y, spec.y + spec.height, _ROWS_PER_READ):
+                bottom = min(top + _ROWS_PER_READ, spec.y + spec.height)
+                rows = image.read_scanlines(0, 0, top, bottom, 0, 0, spec.nchannels,
+                                            pixel_type)
+                if rows is None or image.has_error:
+                    raise InputError(path, f"cannot decode pixels "
+                                           f"({library_message(image.geterror)})")
+                yield np.asarray(rows).reshape(bottom - top, spec.width, -1)
+
+        for rows in read_ahead(bands()):  # the next band decodes while this one counts
+            check.add(rows if order == [0, 1, 2] and rows.shape[-1] == 3
+                      else rows[..., order])
             if layer:
                 samples.append(np.array(rows[::4, ::4][..., layer], dtype=np.float32))
         if chart is not None:  # read the chart's rows only

@@ -245,13 +245,12 @@ def chromaticities(name: str, config: str | os.PathLike[str] | None = None
 def derived_chromaticities(name: str, config: str | os.PathLike[str] | None = None
                            ) -> tuple[float, ...]:
     """Chromaticities of ``name`` from the config's matrix to ACES2065-1 (see module doc)."""
-    import colour
+    from hdrio.cms.luminance import normalised_primary_matrix
 
     matrix = rgb_to_reference_matrix(name, config)
     if matrix is None:
         raise HdrioError(f"{name!r}: not a scene-linear space, it has no chromaticities")
-    ap0 = np.asarray(_AP0_CHROMATICITIES)
-    to_xyz = colour.normalised_primary_matrix(ap0[:6].reshape(3, 2), ap0[6:]) @ matrix
+    to_xyz = normalised_primary_matrix(_AP0_CHROMATICITIES) @ matrix
     xyz = np.column_stack([to_xyz, to_xyz.sum(axis=1)]).T  # R, G, B, white
     xy = xyz[:, :2] / xyz.sum(axis=1, keepdims=True)
     return tuple(float(v) for v in xy.reshape(-1))

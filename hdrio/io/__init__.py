@@ -1,15 +1,12 @@
 """Reading brackets and their exposures; writing images atomically."""
 
-from hdrio.io.brackets import read_brackets, read_codes
-from hdrio.io.exposure import exposure_from_filename, parse_exposure, read_exposure_table
-from hdrio.io.write import write_exr, write_preview
+from hdrio.lazy import lazy_attributes
 
-__all__ = [
-    "exposure_from_filename",
-    "parse_exposure",
-    "read_brackets",
-    "read_codes",
-    "read_exposure_table",
-    "write_exr",
-    "write_preview",
-]
+_EXPORTS = {
+    "read_brackets": "hdrio.io.brackets", "read_codes": "hdrio.io.brackets",
+    "exposure_from_filename": "hdrio.io.exposure", "parse_exposure": "hdrio.io.exposure",
+    "read_exposure_table": "hdrio.io.exposure",
+    "write_exr": "hdrio.io.write", "write_preview": "hdrio.io.write",
+}
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS)

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
-import tempfile
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -23,6 +20,7 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
+from hdrio.io.native import quiet_native_stderr
 from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
@@ -30,42 +28,6 @@ from hdrio.skips import classify
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
-
-
-_QUIET_LOCK = threading.Lock()
-_quiet = {"depth": 0, "saved": -1, "sink": None}
-
-
-@contextlib.contextmanager
-def _quiet_native_stderr() -> Iterator[None]:
-    """Swallow what C libraries (libpng, libjpeg) print on fd 2 while decoding.
-
-    OpenImageIO reports the same problem through ``geterror()``, which we turn into one
-    clear line; the library's own chatter would only add noise to it. Brackets are read
-    on two threads and fd 2 belongs to the process, so the first thread in redirects it
-    and the last one out restores it.
-    """
-    try:
-        fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    with _QUIET_LOCK:
-        if _quiet["depth"] == 0:
-            sys.stderr.flush()
-            _quiet["saved"] = os.dup(fd)
-            _quiet["sink"] = tempfile.TemporaryFile()
-            os.dup2(_quiet["sink"].fileno(), fd)
-        _quiet["depth"] += 1
-    try:
-        yield
-    finally:
-        with _QUIET_LOCK:
-            _quiet["depth"] -= 1
-            if _quiet["depth"] == 0:
-                os.dup2(_quiet["saved"], fd)
-                os.close(_quiet["saved"])
-                _quiet["sink"].close()
 
 
 _ROWS_PER_READ = 256
@@ -97,7 +59,7 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
     import OpenImageIO as oiio
 
     check_input(path)
-    with _quiet_native_stderr():
+    with quiet_native_stderr():
         # Keep stored values: never let a reader premultiply RGB by a translucent alpha.
         config = oiio.ImageSpec()
         config.attribute("oiio:UnassociatedAlpha", 1)

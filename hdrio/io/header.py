@@ -12,11 +12,11 @@ def read_header(path: str | Path) -> dict[str, object]:
     """Attributes of ``path`` by name, plus ``.resolution``, ``.channels`` and ``.format``."""
     import OpenImageIO as oiio
 
-    from hdrio.io.brackets import _quiet_native_stderr
+    from hdrio.io.native import quiet_native_stderr
 
     path = Path(path)
     check_input(path)
-    with _quiet_native_stderr():  # libpng and friends: their lines become our one line
+    with quiet_native_stderr():  # libpng and friends: their lines become our one line
         image = oiio.ImageInput.open(str(path))
         if image is None:
             raise InputError(path, f"cannot read header ({library_message(oiio.geterror)})")

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.errors import OutputError, library_message
+from hdrio.parallel import read_ahead
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
@@ -197,9 +198,13 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
         try:
             if not output.open(str(temp), spec):
                 raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
-            for top in range(0, height, _ROWS_PER_WRITE):
-                rows = pixels[top: top + _ROWS_PER_WRITE]
-                rows = np.ascontiguousarray(band(rows) if band is not None else rows)
+            def bands():
+                for top in range(0, height, _ROWS_PER_WRITE):
+                    rows = pixels[top: top + _ROWS_PER_WRITE]
+                    yield top, np.ascontiguousarray(band(rows) if band is not None else rows)
+
+            # The next band is converted (and observed) while this one is compressed.
+            for top, rows in read_ahead(bands()):
                 if not output.write_scanlines(top, top + rows.shape[0], 0, rows):
                     raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
         finally:

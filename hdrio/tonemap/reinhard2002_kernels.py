@@ -32,10 +32,9 @@ import math
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba.core import types
-from numba.extending import intrinsic
 
+from hdrio.float_bits import bits_float as _bits_float
+from hdrio.float_bits import float_bits as _float_bits
 from hdrio.parallel import on_threads
 
 TILE_ROWS = 16  # rows per tile of the local operator: 16 x 6000 float32 = 384 KB a buffer
@@ -45,36 +44,6 @@ _COLOUR_BLOCK = 4096  # pixels per block of the colour step (48 KB of RGB in, 48
 _SQRT_HALF_BITS = 0x3F3504F3  # float32 bits of sqrt(1/2)
 _LN2 = math.log(2.0)
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # no zero-division branch
-
-
-@intrinsic
-def _float_bits(typingctx, x):
-    """The IEEE-754 bits of a float32 as an int32."""
-    if x != types.float32:
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(32))
-
-    return types.int32(types.float32), codegen
-
-
-@intrinsic
-def _bits_float(typingctx, x):
-    """The float32 whose IEEE-754 bits are the low 32 bits of integer ``x``."""
-    if not isinstance(x, types.Integer):
-        return None
-
-    def codegen(context, builder, signature, args):
-        value = args[0]
-        if x.bitwidth > 32:
-            value = builder.trunc(value, ir.IntType(32))
-        elif x.bitwidth < 32:
-            value = builder.sext(value, ir.IntType(32))
-        return builder.bitcast(value, ir.FloatType())
-
-    return types.float32(x), codegen
-
 
 @numba.njit(inline="always", **_JIT)
 def _log_parts(x: np.float32) -> tuple[int, np.float32]:
@@ -144,7 +113,7 @@ def _luminance(rgb: np.ndarray, p: int, w: np.ndarray) -> np.float32:
     return w[0] * rgb[3 * p] + w[1] * rgb[3 * p + 1] + w[2] * rgb[3 * p + 2]
 
 
-@numba.njit(inline="always", **_JIT)
+@numba.njit(**_JIT)
 def _colour_channel(C: np.ndarray, L: np.ndarray, L_d: np.ndarray, saturation: float) -> None:
     for p in range(C.shape[0]):
         C[p] = _channel(C[p], L[p], L_d[p], saturation)
