@@ -107,4 +107,5 @@ def _merge(chain: Chain, domain: str | None) -> None:
         layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     chain.images.append(Image(output_pixels(result), exr_attributes(result),
                               f"merge of {result.stack.count} brackets", statistics=result,
-                              layers=layers))
+                              layers=layers, alpha=None if result.unseen is None
+                              else (~result.unseen)[..., None].astype(np.float32)))

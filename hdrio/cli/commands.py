@@ -121,7 +121,8 @@ def merge_check(options) -> StreamingCheck:
 
 def merge_report(check: StreamingCheck, result: MergeResult, output: Path) -> CheckReport:
     stats = result.statistics
-    return check.report(str(output), clipped_fraction=stats.clipped_everywhere / stats.pixels)
+    return check.report(str(output), clipped_fraction=stats.clipped_fraction,
+                        masked_fraction=stats.masked_everywhere / stats.pixels)
 
 
 def _seconds(t: float) -> str:
@@ -144,8 +145,10 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
-        f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
-        f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        f"bracket {100 * stats.clipped_fraction:.2f} %, black in every "
+        f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %"
+        + (f"; masked in every bracket {100 * stats.masked_everywhere / stats.pixels:.2f} "
+           "% (alpha 0, not counted)" if stats.masked_everywhere else ""),
         *motion_lines(result),
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",

@@ -169,8 +169,14 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "longer one"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
-           help="never sample pixels of this code value in any bracket (e.g. 0,0,255 for "
-                "registration borders)"),
+           help="keep pixels of this code value out of the solve and the merge (e.g. "
+                "0,0,255 for registration borders): filled from the brackets where they "
+                "are not that colour; where every bracket is, alpha 0 (counted apart)"),
+    Option("--mask", ("FILE",), "masks", text, example=("masks/{stem}.png",), repeat=True,
+           help="keep a mask's black pixels (below half range) out of the solve and the "
+                "merge, as --exclude-color does: one file for every bracket, the option "
+                "repeated once per bracket in their order, or a name with {stem} (each "
+                "bracket's file stem)"),
     Option("--seed", ("N",), "seed", whole, example=("7",), help="sampling seed (default 0)"),
     Option("--no-skip", ("NAME",), "no_skip", skip_name, example=("all",), repeat=True,
            help="turn off one of the work skips (repeatable): brackets, covered, response, "

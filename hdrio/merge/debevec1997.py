@@ -57,6 +57,14 @@ class MergeStatistics:
     observations_skipped: int = 0
     """Pixel-brackets never read: the early stop found their whole row saturated in that
     bracket or a shorter one (out of ``pixels`` x brackets)."""
+    masked_everywhere: int = 0
+    """Excluded in every bracket (``--exclude-color``, ``--mask``): unseen, alpha 0, and
+    not counted as clipped or black (:mod:`hdrio.merge.exclusion`)."""
+
+    @property
+    def clipped_fraction(self) -> float:
+        """Clipped everywhere, as a fraction of the pixels seen (not masked everywhere)."""
+        return self.clipped_everywhere / max(1, self.pixels - self.masked_everywhere)
 
 
 SATURATION_POLICIES = ("channel", "pixel")
