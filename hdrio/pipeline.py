@@ -29,13 +29,13 @@ from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.jit import announce
 from hdrio.merge.debevec1997 import MergeStatistics
-from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
 from hdrio.merge.estimators import (
     MERGE_METHODS,
     NOISE_AWARE,
     effective_weights,
     merge_domain,
 )
+from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
@@ -44,8 +44,8 @@ from hdrio.response.stored import check_response_fits, read_response
 from hdrio.skips import SKIPS, SkipReport, classify
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
-from hdrio.tonemap.reinhard2002 import DELTA, log_average_luminance
 from hdrio.tonemap.display import preview_OCIO_display
+from hdrio.tonemap.reinhard2002 import DELTA, log_average_luminance
 
 Progress = Callable[[str], None]
 
