@@ -36,6 +36,7 @@ from hdrio.merge.estimators import (
     merge_domain,
 )
 from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
+from hdrio.merge.exposures import ExposureCheck, exposures_from_data
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
@@ -72,6 +73,9 @@ class MergeOptions:
     exclude_colour: tuple[int, ...] | None = None
     # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.
     masks: tuple[str, ...] = ()
+    # Merge with each bracket's exposure estimated from the data (hdrio.merge.exposures);
+    # the metadata's are checked against the data's either way.
+    exposures_from_data: bool = False
     seed: int = 0
     # colour-science name of the radiance's primaries: set from the input encoding.
     colourspace: str = DEFAULT_SPACE
@@ -125,6 +129,8 @@ class MergeResult:
     uncertainty: np.ndarray | None = None
     """``sigma_E / E`` per pixel and channel (``--uncertainty``), else ``None``."""
     motion: Motion = field(default_factory=Motion)
+    exposures: ExposureCheck | None = None
+    """The metadata's exposures against the data's (three brackets or more)."""
     unseen: np.ndarray | None = None
     """``(H, W)`` bool: excluded in every bracket (radiance 0, alpha 0), else ``None``."""
 
@@ -205,6 +211,12 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                 message += "; or give a saved response: --response-from EXR"
             raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
+    exposure_check = None
+    if stack.count > 2:  # two brackets cannot say which of them is wrong
+        resolve_exposures = None if solve is None else (lambda stack: solve(
+            stack, None if excluded is None else excluded.any(axis=0)))
+        stack, response, exposure_check = exposures_from_data(
+            stack, response, options.exposures_from_data, resolve_exposures)
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
     if options.align != "off":
@@ -282,8 +294,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
                        skipped=skipped, noise=noise, uncertainty=uncertainty,
-                       motion=motion, unseen=unseen if unseen is not None and unseen.any()
-                       else None)
+                       motion=motion, exposures=exposure_check,
+                       unseen=unseen if unseen is not None and unseen.any() else None)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -324,6 +336,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:clippedFraction": result.statistics.clipped_fraction,
     }
     attributes.update(capture_attributes(stack))
+    if result.exposures is not None:
+        attributes.update(result.exposures.attributes())
     if result.noise is not None:
         attributes.update(result.noise.attributes())
     if result.uncertainty is not None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,8 @@ def run_merge(args: argparse.Namespace) -> int:
         pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
         display_view=display_view, observe=check.add,
     )
+    for line in result.exposures.warnings() if result.exposures is not None else ():
+        print(f"hdrio merge: warning: {line}", file=sys.stderr)
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
     print(summary(result, output, preview, label, args.data_type, report))

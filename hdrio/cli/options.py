@@ -130,6 +130,12 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            example=("exposures.csv",),
            help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "
                 "list.txt"),
+    Option("--exposures-from-data", (), "exposures_from_data", flag, example=(),
+           group=_EXPOSURE,
+           help="merge with each bracket's exposure estimated from the overlap of "
+                "well-exposed pixels (anchored to the metadata's; a bracket more than 1/6 "
+                "stop from its metadata is named either way); with no metadata, give the "
+                "nominal step with --exposures"),
     Option("--response", ("METHOD",), "response", registry(response_methods),
            example=("linear",),
            help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
