@@ -37,6 +37,7 @@ from hdrio.merge.estimators import (
 )
 from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
 from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.nd import NDFilter, NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
@@ -76,6 +77,8 @@ class MergeOptions:
     # Merge with each bracket's exposure estimated from the data (hdrio.merge.exposures);
     # the metadata's are checked against the data's either way.
     exposures_from_data: bool = False
+    # --nd: brackets shot through a neutral-density filter (hdrio.merge.nd).
+    nd: tuple[NDFilter, ...] = ()
     seed: int = 0
     # colour-science name of the radiance's primaries: set from the input encoding.
     colourspace: str = DEFAULT_SPACE
@@ -131,6 +134,7 @@ class MergeResult:
     motion: Motion = field(default_factory=Motion)
     exposures: ExposureCheck | None = None
     """The metadata's exposures against the data's (three brackets or more)."""
+    nd: NDReport | None = None
     unseen: np.ndarray | None = None
     """``(H, W)`` bool: excluded in every bracket (radiance 0, alpha 0), else ``None``."""
 
@@ -185,6 +189,10 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     start = time.perf_counter()
     solve = None
     excluded = exclusions(stack, options)
+    filtered = None  # stops of ND filter per bracket
+    if options.nd:
+        stack, filtered = with_nd(stack, nd_stops(stack.files, options.nd))
+        excluded = exclusions(stack, options)  # in the new order
     if response is not None:
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
@@ -195,6 +203,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                                             else f", lambda {options.smoothing:g}"))
 
         def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+            if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
+                stack = unfiltered(stack, filtered)  # a filter's cast would bend g
             return RESPONSE_METHODS[method](
                 stack, smoothing=options.smoothing, weighting=options.weighting,
                 sampling=options.sampling, samples=options.samples, exclude=exclude,
@@ -212,7 +222,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
     exposure_check = None
-    if stack.count > 2:  # two brackets cannot say which of them is wrong
+    if stack.count > 2 and filtered is None:  # two brackets cannot say which is wrong
         resolve_exposures = None if solve is None else (lambda stack: solve(
             stack, None if excluded is None else excluded.any(axis=0)))
         stack, response, exposure_check = exposures_from_data(
@@ -226,6 +236,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                                          in_place=owned, skip_warp="warp" in skips)
     if motion.warped and excluded is not None:  # the warped borders' colour
         excluded = exclusions(stack, options)
+    nd_report = None
+    if filtered is not None:
+        gains, found = filter_gains(stack, response, filtered)
+        stack = replace(stack, channel_gains=gains)
+        nd_report = NDReport(stack.files, filtered, found)
     if motion.alignment is not None and not motion.warped:
         skipped.warp = True
     timings["align"] = time.perf_counter() - start
@@ -245,7 +260,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     kinds = stack.kinds
     if "covered" in skips and not all(kinds):  # not looked at when read
         kinds = tuple(classify(codes, stack.code_max) for codes in stack.codes)
-    if "covered" in skips and "covers" in kinds and excluded is None:
+    if "covered" in skips and "covers" in kinds and excluded is None and filtered is None:
         j = len(kinds) - 1 - kinds[::-1].index("covers")  # the longest
         skipped.covering = Path(stack.files[j]).name
         merged = ExposureStack.from_arrays(
@@ -268,10 +283,12 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         statistics.pixels * merged.count)
     timings["merge"] = time.perf_counter() - start
     start = time.perf_counter()
-    weights = effective_weights(method, response, merged.exposures, options.weighting, noise)
+    weights = effective_weights(method, response, merged.channel_exposures, options.weighting,
+                                noise)
     unseen = None
     if merged is stack and excluded is not None:
-        unseen = remerge_excluded(stack.codes, stack.exposures, response, radiance, excluded,
+        unseen = remerge_excluded(stack.codes, stack.channel_exposures, response, radiance,
+                                  excluded,
                                   motion.keep, CELL, weights, merge_domain(method),
                                   options.saturation == "channel")
         statistics = masked_statistics(stack.codes, excluded, stack.code_max, statistics)
@@ -294,7 +311,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
                        skipped=skipped, noise=noise, uncertainty=uncertainty,
-                       motion=motion, exposures=exposure_check,
+                       motion=motion, exposures=exposure_check, nd=nd_report,
                        unseen=unseen if unseen is not None and unseen.any() else None)
 
 
@@ -338,6 +355,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     attributes.update(capture_attributes(stack))
     if result.exposures is not None:
         attributes.update(result.exposures.attributes())
+    if result.nd is not None:
+        attributes.update(result.nd.attributes())
     if result.noise is not None:
         attributes.update(result.noise.attributes())
     if result.uncertainty is not None:

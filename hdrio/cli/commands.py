@@ -153,6 +153,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         + (f"; masked in every bracket {100 * stats.masked_everywhere / stats.pixels:.2f} "
            "% (alpha 0, not counted)" if stats.masked_everywhere else ""),
         *motion_lines(result),
+        *[f"nd:        {line}" for line in (result.nd.lines() if result.nd else [])],
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
         f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"
