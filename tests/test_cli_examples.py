@@ -2,8 +2,8 @@
 on the demo brackets, in a fresh folder.
 
 The folder holds the files the examples name (``a.jpg b.jpg c.jpg``, ``IMG_2600.jpg``...,
-``church_*.png`` with ``exposures.csv``, ``mask.png``, a ``shoot/`` of two bracket sets), each one of
-the demo's brackets with EXIF exposure, aperture, ISO and capture time. Commands run in
+``church_*.png`` with ``exposures.csv``, ``mask.png``, a ``shoot/`` of two bracket sets),
+each one of the demo's brackets with EXIF exposure, aperture, ISO and capture time. Commands run in
 order (later ones read what earlier ones wrote, as a reader following the README would),
 split and expanded as a shell would (quotes, globs, ``$D``, ``&&`` and ``;``), through
 ``hdrio.cli.main``. Segments that are not ``hdrio`` (pip, oiiotool) are not run.

@@ -15,7 +15,8 @@ from tests.conftest import run_cli as run
 from tests.nd_scene import CARD_PATCH, PATCH, sun_brackets, sun_scene
 
 FILES = [f"main_{j}.png" for j in range(7)] + [f"sun_{j}.png" for j in range(3)]
-SUN = (14, 30)  # the sun's centre (row, column)
+SUN = (slice(13, 16), slice(29, 32))  # the sun's 3 x 3 core: its peak, with noise
+# averaged over nine pixels (one pixel alone: within 5 % for seeds 0-2, as far as 4.8 %)
 
 
 def delta_E_2000(rgb: np.ndarray, truth: np.ndarray) -> float:
@@ -60,12 +61,12 @@ def test_sun_through_a_10_stop_filter(sun):
     result = merge_stack(stack, MergeOptions(nd=(NDFilter(10.0, "sun_*"),)))
     radiance = result.radiance.astype(np.float64)
     radiance *= truth[PATCH].mean() / radiance[PATCH].mean()  # relative: one global scale
-    sun_ratio = radiance[SUN] / truth[SUN]
-    assert np.all(np.abs(sun_ratio - 1) < 0.05), sun_ratio  # measured within 1 %
+    sun_ratio = radiance[SUN].mean(axis=(0, 1)) / truth[SUN].mean(axis=(0, 1))
+    assert np.all(np.abs(sun_ratio - 1) < 0.05), sun_ratio  # measured within 1.1 %
     assert delta_E_2000(radiance[PATCH].mean(axis=(0, 1)), truth[PATCH].mean(axis=(0, 1))) < 1
     card = delta_E_2000(radiance[CARD_PATCH].mean(axis=(0, 1)),
                         truth[CARD_PATCH].mean(axis=(0, 1)))
-    assert card < 1, card  # measured 0.12; 8.4 with the cast left in (nominal, neutral)
+    assert card < 1, card  # measured 0.08; 6.6 with the cast left in (nominal, neutral)
     gains = result.nd.gains[10.0]
     # Measured against nominal: 2**0.1 x (1, 0.93, 1.12) (the scene's filter), within 1 %.
     np.testing.assert_allclose(gains, 2**0.1 * np.array([1.0, 0.93, 1.12]), rtol=0.01)
@@ -95,7 +96,8 @@ def test_cli_sun_beyond_half_is_scaled_and_said(sun, tmp_path, capsys):
     pixels = image.read_image(oiio.FLOAT)[..., :3] / scale
     truth = sun_scene()
     pixels *= truth[PATCH].mean() / pixels[PATCH].mean()
-    assert np.all(np.abs(pixels[SUN] / truth[SUN] - 1) < 0.05)  # half's 3 digits: no overflow
+    ratio = pixels[SUN].mean(axis=(0, 1)) / truth[SUN].mean(axis=(0, 1))
+    assert np.all(np.abs(ratio - 1) < 0.05), ratio  # stored in half, scaled: no overflow
     assert np.isfinite(pixels).all() and pixels.max() > 65504
 
 
