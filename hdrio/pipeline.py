@@ -222,6 +222,10 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
     exposure_check = None
+    if options.exposures_from_data and (stack.count < 3 or filtered is not None):
+        raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
+                         f"(the filters are measured on their own); got {stack.count} "
+                         "brackets" + (" and --nd" if filtered is not None else ""))
     if stack.count > 2 and filtered is None:  # two brackets cannot say which is wrong
         resolve_exposures = None if solve is None else (lambda stack: solve(
             stack, None if excluded is None else excluded.any(axis=0)))

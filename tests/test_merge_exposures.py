@@ -86,3 +86,10 @@ def test_cli_warns_naming_the_file_and_records_both(shared_data, tmp_path, capsy
     assert spec.getattribute("hdrio:exposuresFromData") == 1
     np.testing.assert_allclose(used, estimated, rtol=1e-6)
     assert abs(np.log2(metadata[4] / estimated[4]) - 1 / 3) < 1 / 50
+
+
+def test_exposures_from_data_needs_three_brackets(brackets, tmp_path, capsys):
+    code, _, err = run(capsys, "merge", *brackets[:2], "--exposures-from-data",
+                       "-o", tmp_path / "o.exr")
+    assert code == 2 and "--exposures-from-data needs three brackets or more" in err, err
+    assert not (tmp_path / "o.exr").exists()
