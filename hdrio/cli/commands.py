@@ -143,7 +143,9 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     lines = [
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), "
         f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])} "
-        f"(exposures from {stack.exposure_sources[0]}), read in {times['read']:.2f} s",
+        f"(exposures from {stack.exposure_sources[0]}"
+        + (", then from the data" if result.exposures and result.exposures.used else "")
+        + f"), read in {times['read']:.2f} s",
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
