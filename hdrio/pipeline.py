@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__, jit
+from hdrio.align.deghost import CELL
 from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
@@ -23,6 +24,7 @@ from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output
 from hdrio.errors import HdrioError, ResponseSolveError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.brackets import read_header as read_bracket_header
+from hdrio.io.masks import read_masks
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw, is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
@@ -33,6 +35,9 @@ from hdrio.merge.estimators import (
     effective_weights,
     merge_domain,
 )
+from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
+from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.nd import NDFilter, NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.numbers import MERGE_NUMBERS, check_fields, check_tonemap_parameters
@@ -42,6 +47,7 @@ from hdrio.skips import SKIPS, SkipReport, classify
 from hdrio.stack import ExposureStack
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
 from hdrio.tonemap.display import preview_OCIO_display
+from hdrio.tonemap.reinhard2002 import DELTA, log_average_luminance
 
 Progress = Callable[[str], None]
 
@@ -66,6 +72,13 @@ class MergeOptions:
     # see hdrio/merge/debevec1997.py.
     saturation: str = "channel"
     exclude_colour: tuple[int, ...] | None = None
+    # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.
+    masks: tuple[str, ...] = ()
+    # Merge with each bracket's exposure estimated from the data (hdrio.merge.exposures);
+    # the metadata's are checked against the data's either way.
+    exposures_from_data: bool = False
+    # --nd: brackets shot through a neutral-density filter (hdrio.merge.nd).
+    nd: tuple[NDFilter, ...] = ()
     seed: int = 0
     # colour-science name of the radiance's primaries: set from the input encoding.
     colourspace: str = DEFAULT_SPACE
@@ -119,6 +132,11 @@ class MergeResult:
     uncertainty: np.ndarray | None = None
     """``sigma_E / E`` per pixel and channel (``--uncertainty``), else ``None``."""
     motion: Motion = field(default_factory=Motion)
+    exposures: ExposureCheck | None = None
+    """The metadata's exposures against the data's (three brackets or more)."""
+    nd: NDReport | None = None
+    unseen: np.ndarray | None = None
+    """``(H, W)`` bool: excluded in every bracket (radiance 0, alpha 0), else ``None``."""
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -144,15 +162,11 @@ def describe_set(stack: ExposureStack) -> str:
     return f"{span} ({'; '.join(notes)})"
 
 
-def exclusion_mask(stack: ExposureStack, colour: Sequence[int] | None) -> np.ndarray | None:
-    """Pixels equal to ``colour`` in any bracket (registration borders), else ``None``."""
-    if colour is None:
-        return None
-    target = np.asarray(colour, dtype=stack.codes.dtype)
-    if target.size != stack.codes.shape[-1]:
-        raise ValueError(f"exclusion colour has {target.size} values, images have "
-                         f"{stack.codes.shape[-1]} channels")
-    return np.any(np.all(stack.codes == target, axis=-1), axis=0)
+def exclusions(stack: ExposureStack, options: MergeOptions) -> np.ndarray | None:
+    """``(P, H, W)`` bool: the observations ``--exclude-color`` and ``--mask`` keep out
+    of the solve and the merge (:mod:`hdrio.merge.exclusion`), else ``None``."""
+    return either(colour_exclusion(stack.codes, options.exclude_colour),
+                  read_masks(options.masks, stack.files, stack.shape[:2]))
 
 
 def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
@@ -163,6 +177,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     ``response``, when given (e.g. read back with :func:`hdrio.response.stored.read_response`),
     is used instead of a solve; camera RAW stacks use the linear response. The skips in
     ``options.skips`` apply (:mod:`hdrio.skips`); ``result.skipped`` says which did.
+    ``--mask`` files (``options.masks``) are the only files read.
     ``owned``: the caller hands the stack over (its codes may be warped in place, so
     alignment needs no second copy of the brackets); otherwise ``stack`` is left as is.
     """
@@ -173,6 +188,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     timings: dict[str, float] = {}
     start = time.perf_counter()
     solve = None
+    excluded = exclusions(stack, options)
+    filtered = None  # stops of ND filter per bracket
+    if options.nd:
+        stack, filtered = with_nd(stack, nd_stops(stack.files, options.nd))
+        excluded = exclusions(stack, options)  # in the new order
     if response is not None:
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
@@ -183,6 +203,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                                             else f", lambda {options.smoothing:g}"))
 
         def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+            if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
+                stack = unfiltered(stack, filtered)  # a filter's cast would bend g
             return RESPONSE_METHODS[method](
                 stack, smoothing=options.smoothing, weighting=options.weighting,
                 sampling=options.sampling, samples=options.samples, exclude=exclude,
@@ -191,7 +213,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                    else {}))
 
         try:
-            response = solve(stack, exclusion_mask(stack, options.exclude_colour))
+            response = solve(stack, None if excluded is None else excluded.any(axis=0))
         except ResponseSolveError as error:
             message = str(error).replace("a saved response", "a saved response "
                                          "(--response-from EXR, from an earlier merge)")
@@ -199,13 +221,30 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                 message += "; or give a saved response: --response-from EXR"
             raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
         skipped.channels_solved = response.parameters.get("channels_solved")
+    exposure_check = None
+    if options.exposures_from_data and (stack.count < 3 or filtered is not None):
+        raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
+                         f"(the filters are measured on their own); got {stack.count} "
+                         "brackets" + (" and --nd" if filtered is not None else ""))
+    if stack.count > 2 and filtered is None:  # two brackets cannot say which is wrong
+        resolve_exposures = None if solve is None else (lambda stack: solve(
+            stack, None if excluded is None else excluded.any(axis=0)))
+        stack, response, exposure_check = exposures_from_data(
+            stack, response, options.exposures_from_data, resolve_exposures)
     timings["response"] = time.perf_counter() - start
     start = time.perf_counter()
     if options.align != "off":
         say(f"aligning {stack.count} brackets ({options.align})")
-    resolve = solve if options.exclude_colour is None else None
+    resolve = solve if excluded is None else None
     stack, response, motion = align_step(stack, response, options.align, resolve,
                                          in_place=owned, skip_warp="warp" in skips)
+    if motion.warped and excluded is not None:  # the warped borders' colour
+        excluded = exclusions(stack, options)
+    nd_report = None
+    if filtered is not None:
+        gains, found = filter_gains(stack, response, filtered)
+        stack = replace(stack, channel_gains=gains)
+        nd_report = NDReport(stack.files, filtered, found)
     if motion.alignment is not None and not motion.warped:
         skipped.warp = True
     timings["align"] = time.perf_counter() - start
@@ -225,7 +264,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     kinds = stack.kinds
     if "covered" in skips and not all(kinds):  # not looked at when read
         kinds = tuple(classify(codes, stack.code_max) for codes in stack.codes)
-    if "covered" in skips and "covers" in kinds:
+    if "covered" in skips and "covers" in kinds and excluded is None and filtered is None:
         j = len(kinds) - 1 - kinds[::-1].index("covers")  # the longest
         skipped.covering = Path(stack.files[j]).name
         merged = ExposureStack.from_arrays(
@@ -248,8 +287,16 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         statistics.pixels * merged.count)
     timings["merge"] = time.perf_counter() - start
     start = time.perf_counter()
-    weights = effective_weights(method, response, merged.exposures, options.weighting, noise)
-    if merged is stack:  # not reduced to one covering bracket
+    weights = effective_weights(method, response, merged.channel_exposures, options.weighting,
+                                noise)
+    unseen = None
+    if merged is stack and excluded is not None:
+        unseen = remerge_excluded(stack.codes, stack.channel_exposures, response, radiance,
+                                  excluded,
+                                  motion.keep, CELL, weights, merge_domain(method),
+                                  options.saturation == "channel")
+        statistics = masked_statistics(stack.codes, excluded, stack.code_max, statistics)
+    elif merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
                      options.saturation == "channel")
     timings["deghost"] += time.perf_counter() - start
@@ -268,7 +315,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     options = replace(options, colourspace=colour.encoding.colour_science)
     return MergeResult(stack, response, radiance, statistics, options, timings, colour=colour,
                        skipped=skipped, noise=noise, uncertainty=uncertainty,
-                       motion=motion)
+                       motion=motion, exposures=exposure_check, nd=nd_report,
+                       unseen=unseen if unseen is not None and unseen.any() else None)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -306,10 +354,13 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:merge": MERGE_METHODS.canonical(options.merge),
         "hdrio:mergeDomain": merge_domain(options.merge),
         "hdrio:saturation": options.saturation,
-        "hdrio:clippedFraction": result.statistics.clipped_everywhere
-        / result.statistics.pixels,
+        "hdrio:clippedFraction": result.statistics.clipped_fraction,
     }
     attributes.update(capture_attributes(stack))
+    if result.exposures is not None:
+        attributes.update(result.exposures.attributes())
+    if result.nd is not None:
+        attributes.update(result.nd.attributes())
     if result.noise is not None:
         attributes.update(result.noise.attributes())
     if result.uncertainty is not None:
@@ -326,6 +377,11 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     attributes.update(motion_attributes(result))
     if options.exclude_colour is not None:
         attributes["hdrio:excludeColor"] = ",".join(str(v) for v in options.exclude_colour)
+    if options.masks:
+        attributes["hdrio:masks"] = [str(name) for name in options.masks]
+    if options.exclude_colour is not None or options.masks:  # unseen: alpha 0
+        statistics = result.statistics
+        attributes["hdrio:maskedFraction"] = statistics.masked_everywhere / statistics.pixels
     if result.colour is not None:
         attributes.update(colour_attributes(result.colour, options.output_space,
                                             options.ocio_config, result.exposure_scale))
@@ -382,18 +438,26 @@ def motion_attributes(result: MergeResult) -> dict[str, object]:
 
 
 def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
-                   space: str = DEFAULT_SPACE, **parameters: float) -> np.ndarray:
+                   space: str = DEFAULT_SPACE, unseen: np.ndarray | None = None,
+                   **parameters: float) -> np.ndarray:
     """Tone-map ``radiance`` and encode it for an sRGB display: values in [0, 1].
 
     ``parameters`` go to the operator (e.g. ``key=0.18`` for the Reinhard operators).
     Greyscale radiance (``(H, W, 1)``) is tone-mapped as grey RGB (its luminance is its
-    one channel, since the weights sum to 1) and encoded as RGB.
+    one channel, since the weights sum to 1) and encoded as RGB. ``unseen`` ``(H, W)``
+    pixels (masked everywhere) are shown black and leave the key as the rest gives it:
+    they are filled, for the operator, with grey at the others' log-average luminance
+    (which does not move eq. 1's mean).
     """
     function = TONEMAP_METHODS[operator]
     canonical = TONEMAP_METHODS.canonical(operator)
     check_tonemap_parameters(canonical, parameters)
     if radiance.shape[-1] == 1:
         radiance = np.repeat(radiance, 3, axis=-1)
+    if unseen is not None:
+        seen = luminance(radiance[~unseen], space)
+        radiance = radiance.copy()
+        radiance[unseen] = log_average_luminance(seen) - DELTA if seen.size else 0.0
     if canonical.endswith("tutorial"):
         display = function(radiance.astype(np.float64), **parameters)
     else:
@@ -401,6 +465,8 @@ def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",
     display = np.nan_to_num(display, nan=0.0)
     if display.shape[-1] == 1:
         display = np.repeat(display, 3, axis=-1)
+    if unseen is not None:
+        display[unseen] = 0.0
     return encode_sRGB(display)
 
 
@@ -519,9 +585,10 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
     if options.motion_layer and result.motion.deghosting is not None:
         layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
+    alpha = None if result.unseen is None else (~result.unseen)[..., None].astype(np.float32)
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
-                                           observe=observe, layers=layers)
+                                           alpha=alpha, observe=observe, layers=layers)
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()
@@ -535,7 +602,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 jit.announce(say, "preview")
             say(f"tone mapping preview ({tonemap})")
             pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
-                                    **(tonemap_parameters or {}))
+                                    result.unseen, **(tonemap_parameters or {}))
         write_preview(preview, pixels)
         result.timings["preview"] = time.perf_counter() - start
     return result

@@ -47,6 +47,9 @@ class ExposureStack:
     metadata: tuple[dict, ...] = field(default_factory=tuple)
     dropped: tuple[tuple[str, str], ...] = ()
     kinds: tuple[str, ...] = ()
+    channel_gains: np.ndarray | None = None
+    """``(P, C)`` transmission of each bracket per channel relative to its exposure (an
+    ND filter's colour cast, :mod:`hdrio.merge.nd`), or ``None``: 1 everywhere."""
 
     def __post_init__(self) -> None:
         validate_stack(self)
@@ -102,6 +105,14 @@ class ExposureStack:
     def shape(self) -> tuple[int, int, int]:
         """``(height, width, channels)`` of every bracket."""
         return tuple(int(n) for n in self.codes.shape[1:])  # type: ignore[return-value]
+
+    @property
+    def channel_exposures(self) -> np.ndarray:
+        """What the merge divides by: ``exposures`` ``(P,)``, or ``(P, C)`` times
+        ``channel_gains`` when they are set."""
+        if self.channel_gains is None:
+            return self.exposures
+        return self.exposures[:, None] * self.channel_gains
 
     @property
     def log_exposures(self) -> np.ndarray:

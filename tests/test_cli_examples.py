@@ -2,8 +2,8 @@
 on the demo brackets, in a fresh folder.
 
 The folder holds the files the examples name (``a.jpg b.jpg c.jpg``, ``IMG_2600.jpg``...,
-``church_*.png`` with ``exposures.csv``, a ``shoot/`` of two bracket sets), each one of
-the demo's brackets with EXIF exposure, aperture, ISO and capture time. Commands run in
+``church_*.png`` with ``exposures.csv``, ``mask.png``, a ``shoot/`` of two bracket sets),
+each one of the demo's brackets with EXIF exposure, aperture, ISO and capture time. Commands run in
 order (later ones read what earlier ones wrote, as a reader following the README would),
 split and expanded as a shell would (quotes, globs, ``$D``, ``&&`` and ``;``), through
 ``hdrio.cli.main``. Segments that are not ``hdrio`` (pip, oiiotool) are not run.
@@ -18,6 +18,7 @@ import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks.truth.scenes import REPO_ROOT, data_root
@@ -110,6 +111,9 @@ def fresh_folder(tmp_path: Path, monkeypatch) -> Path:
             write_image(work / name, frames[j], "uint8", exif if name.endswith(".jpg") else None)
             rows.append(f"{name},{times[j]!r}")
     (work / "exposures.csv").write_text("\n".join(rows) + "\n")
+    mask = np.full((*frames[0].shape[:2], 1), 255, np.uint8)  # --mask's example
+    mask[:8, :8] = 0
+    write_image(work / "mask.png", mask, "uint8")
     shared = data_root()
     if shared.is_dir():
         os.symlink(shared.parent, tmp_path / "shared")

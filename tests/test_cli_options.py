@@ -13,6 +13,7 @@ from hdrio.cli.options import MERGE_OPTIONS, OPTIONS_BY_NAME
 from hdrio.cli.registry import OPERATIONS
 from tests.conftest import DEFAULT_EXPOSURES
 from tests.conftest import run_cli as run
+from tests.test_merge_exclusion import write_masks
 
 
 @pytest.fixture
@@ -32,6 +33,11 @@ def _arguments(option, brackets: list[Path], tmp_path: Path, capsys) -> list[str
         table.write_text("file,exposure_time_s\n" + "".join(
             f"{p.name},{t}\n" for p, t in zip(brackets, DEFAULT_EXPOSURES, strict=True)))
         values = [str(table)]
+    if option.name == "--mask":  # a pattern, one mask per bracket
+        values = [str(tmp_path / "masks" / "{stem}.png")]
+        write_masks(tmp_path / "masks", brackets)
+    if option.name == "--nd":  # the longest bracket through a 1-stop filter
+        values = [f"1:{brackets[-1].name}"]
     if option.name == "--response-from":
         earlier = tmp_path / "earlier.exr"
         assert run(capsys, "merge", *brackets, "-o", earlier, "-q")[0] == 0

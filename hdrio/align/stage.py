@@ -143,6 +143,7 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
     (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain``."""
     if motion.keep is None:
         return
-    terms, estimates = merge_tables(response, stack.exposures, "Debevec1997", domain, weights)
+    terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
+                                    weights)
     remerge_masked(stack.codes, motion.keep, CELL, terms, estimates, stack.code_max,
                    per_channel, domain == "log", radiance)

@@ -10,6 +10,7 @@ operation too) is registered by :mod:`hdrio.cli.chain_colour`.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -102,9 +103,12 @@ def _merge(chain: Chain, domain: str | None) -> None:
                          read_progress=chain.progress.bar)
     chain.brackets = []
     chain.last_merge = result
+    for line in result.exposures.warnings() if result.exposures is not None else ():
+        print(f"hdrio: warning: {line}", file=sys.stderr)
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
     if options.motion_layer and result.motion.deghosting is not None:
         layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     chain.images.append(Image(output_pixels(result), exr_attributes(result),
                               f"merge of {result.stack.count} brackets", statistics=result,
-                              layers=layers))
+                              layers=layers, alpha=None if result.unseen is None
+                              else (~result.unseen)[..., None].astype(np.float32)))

@@ -137,7 +137,8 @@ def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
                                     chain.settings.get("ocio_config")) or DEFAULT_SPACE
     except HdrioError:  # a space the config does not know: luminance as Rec.709
         space = DEFAULT_SPACE
-    image.pixels = render_preview(image.pixels, name, space, **parameters)
+    unseen = None if image.alpha is None else image.alpha[..., 0] == 0  # masked: black
+    image.pixels = render_preview(image.pixels, name, space, unseen, **parameters)
     image.attributes = display_attributes(image.attributes, f"{name} (sRGB)")
     image.display, image.statistics = True, None
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,8 @@ def run_merge(args: argparse.Namespace) -> int:
         pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
         display_view=display_view, observe=check.add, compile_ahead=True,
     )
+    for line in result.exposures.warnings() if result.exposures is not None else ():
+        print(f"hdrio merge: warning: {line}", file=sys.stderr)
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
     print(summary(result, output, preview, label, args.data_type, report))
@@ -121,7 +124,8 @@ def merge_check(options) -> StreamingCheck:
 
 def merge_report(check: StreamingCheck, result: MergeResult, output: Path) -> CheckReport:
     stats = result.statistics
-    return check.report(str(output), clipped_fraction=stats.clipped_everywhere / stats.pixels)
+    return check.report(str(output), clipped_fraction=stats.clipped_fraction,
+                        masked_fraction=stats.masked_everywhere / stats.pixels)
 
 
 def _seconds(t: float) -> str:
@@ -139,14 +143,19 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     lines = [
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), "
         f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])} "
-        f"(exposures from {stack.exposure_sources[0]}), read in {times['read']:.2f} s",
+        f"(exposures from {stack.exposure_sources[0]}"
+        + (", then from the data" if result.exposures and result.exposures.used else "")
+        + f"), read in {times['read']:.2f} s",
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
-        f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
-        f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        f"bracket {100 * stats.clipped_fraction:.2f} %, black in every "
+        f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %"
+        + (f"; masked in every bracket {100 * stats.masked_everywhere / stats.pixels:.2f} "
+           "% (alpha 0, not counted)" if stats.masked_everywhere else ""),
         *motion_lines(result),
+        *[f"nd:        {line}" for line in (result.nd.lines() if result.nd else [])],
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
         f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"

@@ -40,6 +40,7 @@ from hdrio.cli.values import (
     flag,
     integers,
     merge_method,
+    nd_filter,
     positive_number,
     positive_whole,
     registry,
@@ -130,6 +131,18 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            example=("exposures.csv",),
            help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "
                 "list.txt"),
+    Option("--exposures-from-data", (), "exposures_from_data", flag, example=(),
+           group=_EXPOSURE,
+           help="merge with each bracket's exposure estimated from the overlap of "
+                "well-exposed pixels (anchored to the metadata's; a bracket more than 1/6 "
+                "stop from its metadata is named either way); with no metadata, give the "
+                "nominal step with --exposures"),
+    Option("--nd", ("STOPS[:PATTERN]",), "nd", nd_filter, example=("1:c.jpg",),
+           repeat=True, group=_EXPOSURE,
+           help="the brackets whose name matches PATTERN (all without one) were shot "
+                "through a neutral-density filter of STOPS stops (ND 3.0 = ND1000 = 10); "
+                "its true level and colour cast are measured where they overlap the "
+                "unfiltered brackets, and corrected (repeatable; PATTERN e.g. 'sun_*.jpg')"),
     Option("--response", ("METHOD",), "response", registry(response_methods),
            example=("linear",),
            help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
@@ -169,8 +182,14 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "longer one"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
-           help="never sample pixels of this code value in any bracket (e.g. 0,0,255 for "
-                "registration borders)"),
+           help="keep pixels of this code value out of the solve and the merge (e.g. "
+                "0,0,255 for registration borders): filled from the brackets where they "
+                "are not that colour; where every bracket is, alpha 0 (counted apart)"),
+    Option("--mask", ("FILE",), "masks", text, example=("mask.png",), repeat=True,
+           help="keep a mask's black pixels (below half range) out of the solve and the "
+                "merge, as --exclude-color does: one file for every bracket, the option "
+                "repeated once per bracket in their order, or a name with {stem} (each "
+                "bracket's file stem: masks/{stem}.png)"),
     Option("--seed", ("N",), "seed", whole, example=("7",), help="sampling seed (default 0)"),
     Option("--no-skip", ("NAME",), "no_skip", skip_name, example=("all",), repeat=True,
            help="turn off one of the work skips (repeatable): brackets, covered, response, "

@@ -172,3 +172,10 @@ def merge_methods():
 
 
 merge_method = registry(merge_methods)
+
+
+def nd_filter(values: list[str]):
+    """``--nd STOPS[:PATTERN]`` (:func:`hdrio.merge.nd.parse_nd`)."""
+    from hdrio.merge.nd import parse_nd
+
+    return parse_nd(values[0])

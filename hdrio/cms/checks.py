@@ -39,6 +39,8 @@ class CheckReport:
     out_of_gamut: float
     gamut: str
     clipped_fraction: float | None = None
+    masked_fraction: float | None = None
+    """Pixels masked in every bracket (alpha 0; ``hdrio:maskedFraction``)."""
     delta_E: list[float] | None = None
     uncertainty: dict[str, float] | None = None
     """Of the ``uncertainty`` layer (``hdrio merge --uncertainty``): its median, 99th
@@ -183,9 +185,10 @@ class StreamingCheck:
 
     def __init__(self, chromaticities: tuple[float, ...] = REC709_D65, *,
                  units: str = "relative", clipped_fraction: float | None = None,
-                 gamut: str | None = None) -> None:
+                 gamut: str | None = None, masked_fraction: float | None = None) -> None:
         self.chromaticities = tuple(float(v) for v in chromaticities)
         self.units, self.clipped_fraction, self.gamut = units, clipped_fraction, gamut
+        self.masked_fraction = masked_fraction
         self._weights = normalised_primary_matrix(self.chromaticities)[1].astype(np.float32)
         self._to_gamut = _gamut_matrix(self.chromaticities, gamut)
         self._counts = np.zeros(_BINS, dtype=np.int64)
@@ -200,6 +203,8 @@ class StreamingCheck:
             return getattr(value, "value", value)
 
         clipped = plain("hdrio:clippedFraction", None)
+        masked = plain("hdrio:maskedFraction", None)
+        kwargs.setdefault("masked_fraction", None if masked is None else float(masked))  # type: ignore[arg-type]
         return cls(tuple(plain("chromaticities", REC709_D65)),  # type: ignore[arg-type]
                    units=str(plain("hdrio:units", "unknown")),
                    clipped_fraction=None if clipped is None else float(clipped),  # type: ignore[arg-type]
@@ -251,8 +256,8 @@ class StreamingCheck:
         high = self._order_statistic(cumulative, k + 1)
         return low + (rank - k) * (high - low)
 
-    def report(self, source: str = "", clipped_fraction: float | None = None
-               ) -> CheckReport:
+    def report(self, source: str = "", clipped_fraction: float | None = None,
+               masked_fraction: float | None = None) -> CheckReport:
         """The :class:`CheckReport` of everything added so far."""
         counted = int(self._counts.sum())
         percentiles: dict[str, float] = {}
@@ -269,7 +274,9 @@ class StreamingCheck:
             negative=self.negative, non_finite=self.non_finite,
             out_of_gamut=self.outside / max(self.pixels, 1),
             gamut="own primaries" if self.gamut is None else self.gamut,
-            clipped_fraction=clipped, source=source)
+            clipped_fraction=clipped, source=source,
+            masked_fraction=self.masked_fraction if masked_fraction is None
+            else masked_fraction)
 
 
 _ROWS_PER_READ = 512
@@ -365,7 +372,11 @@ def format_report(report: CheckReport) -> str:
               f"  out of gamut: {100 * report.out_of_gamut:.3f} % ({report.gamut})"]
     if report.clipped_fraction is not None:
         lines.append(f"  clipped:      {100 * report.clipped_fraction:.2f} % of pixels "
-                     "saturated in every bracket")
+                     "saturated in every bracket"
+                     + ("" if not report.masked_fraction else " (of those not masked)"))
+    if report.masked_fraction:
+        lines.append(f"  masked:       {100 * report.masked_fraction:.2f} % of pixels "
+                     "excluded in every bracket (alpha 0)")
     if report.delta_E is not None:
         dE = np.asarray(report.delta_E)
         lines.append(f"  chart:        Delta E 2000 mean {dE.mean():.2f}, max {dE.max():.2f} "

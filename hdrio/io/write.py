@@ -262,7 +262,9 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         if factor != 1:
             colour *= factor
         if pixel_type == "half":  # the image's own channels stay positive; layers keep 0
-            np.clip(colour, HALF_MIN_POSITIVE, HALF_MAX, out=colour)
+            # Alpha 0 stays 0 (e.g. pixels masked everywhere: hdrio.merge.exclusion).
+            np.clip(colour[..., :3], HALF_MIN_POSITIVE, HALF_MAX, out=colour[..., :3])
+            np.clip(colour[..., 3:], 0.0, HALF_MAX, out=colour[..., 3:])
             np.clip(rows[..., own:], -HALF_MAX, HALF_MAX, out=rows[..., own:])
             rows = rows.astype(np.float16)
         if observe is not None:

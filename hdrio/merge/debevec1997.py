@@ -57,6 +57,14 @@ class MergeStatistics:
     observations_skipped: int = 0
     """Pixel-brackets never read: the early stop found their whole row saturated in that
     bracket or a shorter one (out of ``pixels`` x brackets)."""
+    masked_everywhere: int = 0
+    """Excluded in every bracket (``--exclude-color``, ``--mask``): unseen, alpha 0, and
+    not counted as clipped or black (:mod:`hdrio.merge.exclusion`)."""
+
+    @property
+    def clipped_fraction(self) -> float:
+        """Clipped everywhere, as a fraction of the pixels seen (not masked everywhere)."""
+        return self.clipped_everywhere / max(1, self.pixels - self.masked_everywhere)
 
 
 SATURATION_POLICIES = ("channel", "pixel")
@@ -66,9 +74,16 @@ MERGE_BAND_ROWS = 128
 released after it: 128 rows of seven 24 MP brackets hold 16 MB)."""
 
 
+def exposure_columns(exposures) -> np.ndarray:
+    """Exposures ``(P,)`` or per channel ``(P, C)`` (:attr:`ExposureStack.channel_exposures`)
+    as float64 ``(P, 1)`` or ``(P, C)``, to broadcast against per-channel tables."""
+    exposures = np.asarray(exposures, dtype=np.float64)
+    return exposures[:, None] if exposures.ndim == 1 else exposures
+
+
 def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str) -> np.ndarray:
     """Per-bracket estimates ``(P, code_max + 1, C)``: ``g(z) - ln dt`` or ``f^-1(z) / dt``."""
-    exposures = np.asarray(exposures, dtype=np.float64)[:, None, None]
+    exposures = exposure_columns(exposures)[:, None, :]  # (P, 1, 1 or C)
     if domain == "log":
         return response.log_inverse[None] - np.log(exposures)
     with np.errstate(over="ignore"):
@@ -111,7 +126,8 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
                          f"brackets have {channels}")
     if count > MAX_BRACKETS:
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
-    terms, estimates = merge_tables(response, stack.exposures, weighting, domain, weights)
+    terms, estimates = merge_tables(response, stack.channel_exposures, weighting, domain,
+                                    weights)
     if saturation == "channel" and channels == 3 and stack.code_max < PAIR_LEVELS:
         pairs = pair_tables(terms, stack.code_max)
     else:

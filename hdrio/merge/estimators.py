@@ -36,7 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.merge.debevec1997 import MergeStatistics, code_weights, merge_brackets
+from hdrio.merge.debevec1997 import (
+    MergeStatistics,
+    code_weights,
+    exposure_columns,
+    merge_brackets,
+)
 from hdrio.merge.noise import (
     NoiseModel,
     code_variance_floor,
@@ -78,9 +83,8 @@ def weights_inverse_variance(response: CameraResponse, exposures, noise: NoiseMo
 
 def weights_Poisson(response: CameraResponse, exposures, noise: NoiseModel) -> np.ndarray:
     """``w_j(z) = dt_j`` on usable codes, else 0: ``(P, C, levels)`` (seconds)."""
-    exposures = np.asarray(exposures, dtype=np.float64)
     usable = (usable_codes(response, noise) & supported_range(response)).T[None]
-    return np.where(usable, exposures[:, None, None], 0.0)
+    return np.where(usable, exposure_columns(exposures)[:, :, None], 0.0)
 
 
 def merge_weights(method: str, response: CameraResponse, exposures,
@@ -117,7 +121,7 @@ def _merge(method: str):
         if method in NOISE_AWARE and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,
                               code_floor=code_variance_floor(stack.files))
-        weights = merge_weights(method, response, stack.exposures, noise)
+        weights = merge_weights(method, response, stack.channel_exposures, noise)
         return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
                               early_stop, weights)
 

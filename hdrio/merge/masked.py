@@ -90,7 +90,8 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     codes
         ``(P, H, W, C)`` code values, shortest exposure first.
     keep
-        ``(P, rows, cols)`` weights in [0, 1] at cell centres ``(i + 0.5) * cell``.
+        ``(P, rows, cols)`` weights in [0, 1] at cell centres ``(i + 0.5) * cell``
+        (float32 or float64; ``cell`` 1 gives per-pixel weights).
     terms, estimates
         :func:`hdrio.merge.debevec1997.merge_tables`' tables, ``(P, C, levels)``.
     per_channel, log_domain
@@ -100,7 +101,8 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     if not low.any():
         return 0
     touched = scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
-    _remerge(codes, np.ascontiguousarray(keep, np.float64), touched, cell,
+    _remerge(codes, np.ascontiguousarray(
+        keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
              np.ascontiguousarray(terms, np.complex128),
              np.ascontiguousarray(estimates, np.float64), code_max, per_channel,
              log_domain, radiance)

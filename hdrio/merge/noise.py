@@ -48,6 +48,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from hdrio.io.staging import strided_copy
+from hdrio.merge.debevec1997 import exposure_columns
 from hdrio.response.curve import CameraResponse
 
 QUANTISATION = 1.0 / 12.0
@@ -140,9 +141,8 @@ def observation_variance(response: CameraResponse, exposures, noise: NoiseModel
 
     Units: relative radiance squared (``x_j = f^-1(z) / dt_j``).
     """
-    exposures = np.asarray(exposures, dtype=np.float64)
     per_code = noise.exposure_variance(response).T  # (C, levels)
-    return per_code[None] / exposures[:, None, None] ** 2
+    return per_code[None] / exposure_columns(exposures)[:, :, None] ** 2
 
 
 def usable_codes(response: CameraResponse, noise: NoiseModel) -> np.ndarray:

@@ -91,9 +91,10 @@ def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
     count, height, width, channels = stack.codes.shape
     weights = np.ascontiguousarray(np.broadcast_to(
         weights, (count, channels, response.code_max + 1)), dtype=np.float64)
-    variances = np.ascontiguousarray(observation_variance(response, stack.exposures, noise))
+    variances = np.ascontiguousarray(observation_variance(response, stack.channel_exposures,
+                                                          noise))
     estimates = np.ascontiguousarray(
-        estimate_tables(response, stack.exposures, "linear").transpose(0, 2, 1))
+        estimate_tables(response, stack.channel_exposures, "linear").transpose(0, 2, 1))
     out = np.empty((height, width * channels), dtype=np.float32)
     numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
     _uncertainty_kernel(stack.codes.reshape(count, height, width * channels), weights,

@@ -1,0 +1,183 @@
+"""Each bracket's relative exposure from the data (``--exposures-from-data``).
+
+EXIF exposure times are nominal (a camera's "1/30 s" is 1/32 s, shutters and apertures
+drift): an error of 1/3 stop in one bracket bends the solved response and leaves a band
+in the merge. With the recovered response ``g = ln f^-1``, a pixel well exposed in
+brackets ``j`` and ``k`` gives ``ln(t_k / t_j) = g(z_k) - g(z_j)``; the median over
+every such pixel and channel is a robust estimate of the ratio (moving objects, a few
+clipped or noisy codes do not move it). The ratios of neighbouring brackets (and those
+two apart) are fitted by weighted least squares to one log exposure per bracket, a
+weak tie to the metadata's ratios keeps brackets with no overlap where the metadata
+puts them, and the whole set is anchored to the metadata by the median offset (one
+wrong bracket does not move the others). Iterating estimate and response solve is
+Mitsunaga & Nayar's scheme (the ratio update of their eq. 9, here as a median in the
+log domain).
+
+References
+----------
+Mitsunaga, T., Nayar, S. K. (1999). Radiometric self calibration. CVPR 1999, 374-380.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from hdrio.response.curve import CameraResponse
+from hdrio.stack import ExposureStack
+
+WARN_STOPS = 1 / 6
+"""A bracket whose estimate differs from its metadata by more than this is named."""
+WELL_EXPOSED_CODES = (0.15, 0.9)
+"""Codes used, as fractions of ``code_max``: away from the noise floor and the shoulder."""
+MAX_PIXELS = 1 << 18
+"""Pixels per bracket looked at (a regular subsample of larger images)."""
+MIN_OVERLAP = 200
+"""Observations (pixel-channels) a pair of brackets must share to be compared."""
+PRIOR_WEIGHT = 1e-3
+"""Weight of the metadata's ratio of neighbours, against ``sqrt(overlap)`` for data."""
+
+
+def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
+                       response: CameraResponse) -> np.ndarray:
+    """Relative exposures ``(P,)`` of ``codes`` ``(P, H, W, C)`` (shortest first) from
+    the data, in the units of ``exposures`` (the metadata's, which anchor the set).
+
+    Parameters
+    ----------
+    codes
+        Code values of the brackets, sorted by increasing exposure.
+    exposures
+        The metadata's exposures (seconds, or any relative unit).
+    response
+        The camera response whose ``log_inverse`` linearises the codes.
+    """
+    count, height, width, channels = codes.shape
+    stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
+    sample = np.asarray(codes[:, ::stride, ::stride]).reshape(count, -1, channels)
+    code_max = response.code_max
+    low, high = (fraction * code_max for fraction in WELL_EXPOSED_CODES)
+    columns = np.arange(channels)
+    log_e = response.log_inverse[sample, columns]
+    good = (sample > low) & (sample < high) & response.supported[sample, columns]
+    meta = np.log(np.asarray(exposures, np.float64))
+    rows, targets, weights = [], [], []
+    for j in range(count):
+        for k in range(j + 1, min(count, j + 3)):
+            both = good[j] & good[k]
+            overlap = int(np.count_nonzero(both))
+            if overlap >= MIN_OVERLAP:
+                rows.append((j, k))
+                targets.append(float(np.median(log_e[k][both] - log_e[j][both])))
+                weights.append(math.sqrt(overlap))
+            if k == j + 1:  # the weak tie to the metadata
+                rows.append((j, k))
+                targets.append(meta[k] - meta[j])
+                weights.append(PRIOR_WEIGHT)
+    design = np.zeros((len(rows) + 1, count))
+    for r, (j, k) in enumerate(rows):
+        design[r, j], design[r, k] = -weights[r], weights[r]
+    design[-1, 0] = 1.0  # the gauge; the anchor below replaces it
+    target = np.append(np.asarray(targets) * np.asarray(weights), 0.0)
+    log_t = np.linalg.lstsq(design, target, rcond=None)[0]
+    return np.exp(anchor_Theil_Sen(log_t, meta))
+
+
+def anchor_Theil_Sen(log_t: np.ndarray, meta: np.ndarray) -> np.ndarray:
+    """``log_t`` mapped onto the metadata's scale: ``(log_t - c) / s`` for the
+    Theil-Sen line ``log_t = s meta + c`` (the median of the pairwise slopes, then of
+    the offsets), so one wrong bracket moves neither. A set of brackets and its response
+    are only known up to such a line (``g -> s g + c``, ``ln t -> s ln t + c``: the
+    exponent ambiguity of self-calibration); the metadata's spacing fixes it. Two
+    brackets give no slope: only the offset is fitted."""
+    count = log_t.size
+    slope = 1.0
+    if count > 2:
+        j, k = np.triu_indices(count, 1)
+        spread = meta[k] - meta[j]
+        ok = np.abs(spread) > 1e-9
+        slope = float(np.median((log_t[k] - log_t[j])[ok] / spread[ok]))
+        if not slope > 0:  # the data contradict the order: trust only the offset
+            slope = 1.0
+    offset = float(np.median(log_t - slope * meta))
+    return (log_t - offset) / slope
+
+
+@dataclass(frozen=True)
+class ExposureCheck:
+    """The metadata's exposures against the data's, per bracket (shortest first).
+
+    Attributes
+    ----------
+    files
+        The brackets.
+    metadata, estimated
+        Relative exposures (the metadata's units): as read, and from the data.
+    used
+        Whether the merge used ``estimated`` (``--exposures-from-data``).
+    """
+
+    files: tuple[str, ...]
+    metadata: np.ndarray
+    estimated: np.ndarray
+    used: bool = False
+
+    @property
+    def stops(self) -> np.ndarray:
+        """``log2(estimated / metadata)`` per bracket."""
+        return np.log2(self.estimated / self.metadata)
+
+    def warnings(self) -> list[str]:
+        """One line per bracket off by more than :data:`WARN_STOPS`, naming its file."""
+        lines = []
+        for name, meta, data, stops in zip(self.files, self.metadata, self.estimated,
+                                           self.stops, strict=True):
+            if abs(stops) > WARN_STOPS:
+                lines.append(
+                    f"{Path(name).name}: exposure {_text(meta)} in the metadata, the data "
+                    f"say {_text(data)} ({stops:+.2f} stop); "
+                    + ("used the data's (--exposures-from-data)" if self.used
+                       else "--exposures-from-data uses the data's"))
+        return lines
+
+    def attributes(self) -> dict[str, object]:
+        """``hdrio:exposuresMetadata``, ``hdrio:exposuresEstimated`` (decimal text, like
+        ``hdrio:exposures``) and ``hdrio:exposuresFromData`` (1 when used)."""
+        return {"hdrio:exposuresMetadata": [f"{t:.9g}" for t in self.metadata],
+                "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
+                "hdrio:exposuresFromData": int(self.used)}
+
+
+def _text(t: float) -> str:
+    return f"1/{1 / t:.4g}" if t < 1 else f"{t:.4g}"
+
+
+def exposures_from_data(stack: ExposureStack, response: CameraResponse, use: bool,
+                        solve: Callable[[ExposureStack], CameraResponse] | None = None,
+                        iterations: int = 4, tolerance_stops: float = 1e-3
+                        ) -> tuple[ExposureStack, CameraResponse, ExposureCheck]:
+    """Estimate the exposures; with ``use``, merge with them: the stack's exposures are
+    replaced and the response re-solved (``solve``, when given) until the estimates
+    move less than ``tolerance_stops`` (at most ``iterations`` solves).
+
+    Returns the stack and response to merge with, and the check (for the warnings and
+    the header).
+    """
+    metadata = np.asarray(stack.exposures, np.float64)
+    estimated = estimate_exposures(stack.codes, metadata, response)
+    if use:
+        for _ in range(iterations if solve is not None else 0):
+            stack = replace(stack, exposures=estimated)
+            response = solve(stack)
+            again = estimate_exposures(stack.codes, metadata, response)
+            moved = float(np.max(np.abs(np.log2(again / estimated))))
+            estimated = again
+            if moved < tolerance_stops:
+                break
+        stack = replace(stack, exposures=estimated)
+    return stack, response, ExposureCheck(tuple(stack.files), metadata, estimated, use)
+
