@@ -93,9 +93,6 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 LOG_FLOAT32_TINY = math.log(FLOAT32_TINY) + 1e-3
 LOG_FLOAT32_MAX = math.log(FLOAT32_MAX) - 1e-3
 
-ROWS_PER_TASK = 16
-"""Rows per parallel task: small enough for the threads to share any band evenly."""
-
 PAIR_LEVELS = 256
 """Pair tables are built for codes of at most this many levels (8-bit)."""
 
@@ -416,36 +413,31 @@ def _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel, l
 def merge_rows_by_pairs(first, last, codes, top, bottom, pairs, estimates, code_max,
                         log_domain, early_stop, out, clipped_rows, black_rows,
                         skipped_rows):  # pragma: no cover - compiled
-    """Tasks ``first .. last - 1`` (:data:`ROWS_PER_TASK` rows each, from ``top``) of
-    :func:`merge_kernel`'s pair-table path."""
+    """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s pair-table path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)  # numerator + i denominator
     scale = np.empty(n, np.int32)
     zeros = np.zeros(n, codes.dtype)
-    for task in range(first, last):
-        for y in range(top + task * ROWS_PER_TASK,
-                       min(bottom, top + (task + 1) * ROWS_PER_TASK)):
-            stop = _early_stop(codes, y, code_max, early_stop)
-            _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max, sums)
-            _finish_row(codes, y, stop, sums, scale, estimates, code_max, True, log_domain,
-                        out, clipped_rows, black_rows, skipped_rows)
+    for y in range(top + first, top + last):
+        stop = _early_stop(codes, y, code_max, early_stop)
+        _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max, sums)
+        _finish_row(codes, y, stop, sums, scale, estimates, code_max, True, log_domain, out,
+                    clipped_rows, black_rows, skipped_rows)
 
 
 @njit(**_KERNEL)
 def merge_rows_by_brackets(first, last, codes, top, bottom, terms, estimates, code_max,
                            per_channel, log_domain, early_stop, out, clipped_rows,
                            black_rows, skipped_rows):  # pragma: no cover - compiled
-    """Tasks ``first .. last - 1`` of :func:`merge_kernel`'s general path."""
+    """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s general path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)
     scale = np.empty(n, np.int32)
-    for task in range(first, last):
-        for y in range(top + task * ROWS_PER_TASK,
-                       min(bottom, top + (task + 1) * ROWS_PER_TASK)):
-            stop = _early_stop(codes, y, code_max, early_stop)
-            _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel, sums)
-            _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel,
-                        log_domain, out, clipped_rows, black_rows, skipped_rows)
+    for y in range(top + first, top + last):
+        stop = _early_stop(codes, y, code_max, early_stop)
+        _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel, sums)
+        _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel, log_domain,
+                    out, clipped_rows, black_rows, skipped_rows)
 
 
 def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_channel,
@@ -464,11 +456,10 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_chan
     and ``skipped_rows`` (pixel-brackets the early stop never read).
 
     The two paths are two serial kernels (each compiles only what it runs, on first
-    use) whose tasks of :data:`ROWS_PER_TASK` rows the threads share
-    (:func:`hdrio.parallel.on_threads`): less to compile than numba's ``parallel=True``,
-    for the same speed.
+    use) whose rows the threads share in chunks (:func:`hdrio.parallel.on_threads`):
+    less to compile than numba's ``parallel=True``, for the same speed.
     """
-    tasks = (bottom - top + ROWS_PER_TASK - 1) // ROWS_PER_TASK
+    tasks = bottom - top  # rows
     if pairs.shape[0] == codes.shape[0]:
         on_threads(merge_rows_by_pairs, tasks, codes, top, bottom, pairs, estimates,
                    code_max, log_domain, early_stop, out, clipped_rows, black_rows,
