@@ -13,6 +13,7 @@ the cache.
 from __future__ import annotations
 
 import importlib
+import os
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
@@ -120,7 +121,11 @@ def is_stage_cached(stage: str) -> bool:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.jit merge preview=OPERATOR check``: compile those kernels."""
+    """``python -m hdrio.jit merge preview=OPERATOR check``: compile those kernels (and
+    stop when the process that started this one stops)."""
+    from hdrio.parallel import die_with_parent
+
+    die_with_parent(os.getppid())
     for stage in argv:
         name, _, value = stage.partition("=")
         if name == "merge":

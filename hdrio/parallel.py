@@ -1,14 +1,22 @@
-"""How many threads hdrio's kernels use, and ways to spread work over them."""
+"""How many threads hdrio's kernels use, ways to spread work over them, and helper
+processes that end with their parent."""
 
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
+import sys
+import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
 T = TypeVar("T")
 _DONE = object()  # read_ahead's end marker
+_PR_SET_PDEATHSIG = 1
+_PARENT_POLL_S = 0.5
 
 
 def threads() -> int:
@@ -53,3 +61,22 @@ def read_ahead(items: Iterator[T]) -> Iterator[T]:
         while (item := upcoming.result()) is not _DONE:
             upcoming = pool.submit(next, items, _DONE)
             yield item
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Make this process exit when ``parent_pid`` (its parent) does."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(_PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="hdrio-parent-watch", daemon=True).start()

@@ -12,13 +12,10 @@ parent's process id, so a killed ``hdrio`` leaves no worker behind.
 
 from __future__ import annotations
 
-import ctypes
 import multiprocessing
 import os
-import signal
 import socket
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -27,11 +24,10 @@ from dataclasses import dataclass
 from hdrio.batch.journal import record_done
 from hdrio.batch.partial import clean_partials
 from hdrio.batch.plan import SetTask
+from hdrio.parallel import die_with_parent
 
 Work = Callable[[SetTask], tuple[bool, str]]
 OnResult = Callable[["SetResult", int, int], None]
-_PR_SET_PDEATHSIG = 1
-_PARENT_POLL_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -101,25 +97,6 @@ def run_set(work: Work, task: SetTask) -> SetResult:
             record_done(task.outputs, task.fingerprint, task.files)
     return SetResult(task.index, ok, printed, socket.gethostname(), os.getpid(),
                      time.perf_counter() - start, _peak_rss_mb())
-
-
-def die_with_parent(parent_pid: int) -> None:
-    """Make this process exit when ``parent_pid`` (its parent) does."""
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-        except (OSError, AttributeError):
-            pass
-    if os.getppid() != parent_pid:  # the parent died before the line above
-        os._exit(1)
-
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(_PARENT_POLL_S)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="hdrio-parent-watch", daemon=True).start()
 
 
 def worker_threads(workers: int) -> int:
