@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from hdrio.align.pyramid import base_factor
+from hdrio.align.registration import unusable
 from hdrio.skips import well_exposed_codes
 
 STRIDE = 4
@@ -23,6 +25,8 @@ POINTS = 20_000
 STILL = 0.05
 """Pixels: half of ``--align auto``'s 0.1 px (one Gauss-Newton step from the identity
 is exact to first order only)."""
+USABLE_STRIDE = 8
+"""Every this-many-th pixel each way is looked at to tell how much of a bracket is usable."""
 
 
 @njit(cache=True, nogil=True)
@@ -72,9 +76,20 @@ def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return rows * STRIDE + STRIDE // 2, cols * STRIDE + STRIDE // 2
 
 
-def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int) -> bool:
-    """True when one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
-    its neighbour towards ``reference``.
+def usable(codes: np.ndarray, code_max: int, stride: int = USABLE_STRIDE) -> np.ndarray:
+    """``(h, w)``: every ``stride``-th pixel of one bracket ``(H, W, C)``, whether every
+    channel is well exposed (unclipped, above the noise)."""
+    low, high = well_exposed_codes(code_max)
+    grid = codes[stride // 2::stride, stride // 2::stride]
+    return np.all((grid >= low) & (grid <= high), axis=-1)
+
+
+def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int
+                ) -> tuple[bool, dict[int, str]]:
+    """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
+    its nearest registrable neighbour towards ``reference``, and the brackets too little
+    of which is usable to register (:func:`hdrio.align.registration.unusable`, on a
+    sample of every :data:`USABLE_STRIDE`-th pixel): ``{bracket: why}``, not tested.
 
     Parameters
     ----------
@@ -88,7 +103,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     ys, xs = _points(codes[reference], linear[reference])
     n = ys.size
     reads = {}
-    for j in range(count):
+    for j in range(count):  # (refused brackets are read too: a few hundred kB)
         values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
         _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
               good)
@@ -96,15 +111,26 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     half = max(height, width) / 2.0
     u = (xs - (width - 1) / 2.0) / half
     v = (ys - (height - 1) / 2.0) / half
-    for j in range(count):
-        if j == reference:
-            continue
-        k = j + 1 if j < reference else j - 1
+    refused: dict[int, str] = {}
+    scale = (USABLE_STRIDE / base_factor(height, width)) ** 2
+    masks = {reference: usable(codes[reference], code_max)}
+    pairs = []
+    for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
+        k = reference
+        for j in side:
+            masks[j] = usable(codes[j], code_max)
+            why = unusable(masks[k], masks[j], scale)
+            if why is not None:
+                refused[j] = why
+                continue
+            pairs.append((j, k))
+            k = j
+    for j, k in pairs:
         template, gx, gy, ok_k = reads[k]
         values, _, _, ok_j = reads[j]
         good = ok_k & ok_j
         if np.count_nonzero(good) < 200:
-            return False  # too little in common to tell: measure properly
+            return False, refused  # too little in common to tell: measure properly
         sd = np.stack([gx * half, gy * half, -v * gx * half + u * gy * half,
                        np.ones(n)], axis=1)[good]
         error = (values - template)[good]
@@ -115,9 +141,9 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
         try:
             delta = np.linalg.solve(weighted.T @ sd, weighted.T @ error)
         except np.linalg.LinAlgError:
-            return False
+            return False, refused
         # Corner motion of a shift (delta[0:2], normalised units) and rotation delta[2].
         motion = half * (np.hypot(delta[0], delta[1]) + abs(delta[2]) * np.sqrt(2.0))
         if motion >= STILL:
-            return False
-    return True
+            return False, refused
+    return True, refused

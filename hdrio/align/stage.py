@@ -77,10 +77,12 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:
         reference = reference_bracket(stack.codes, stack.code_max)
-        if looks_still(stack.codes, linear_tables(response, stack.exposures),
-                       stack.code_max, reference):
+        still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
+                                     stack.code_max, reference)
+        if still:
             motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
-                                         model, (0.0,) * stack.count)
+                                         model, (0.0,) * stack.count,
+                                         tuple(sorted(refused.items())))
             return stack, response, motion
     motion.alignment, response = register(stack, response, model, solve)
     if mode != "auto" or motion.alignment.moved or not skip_warp:
