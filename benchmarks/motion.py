@@ -7,8 +7,9 @@ response given (no solve, so only the steps measured run). Three runs of
 ``--repeats``), the merge of each as its baseline:
 
 ``static auto``
-    a still stack with ``--align auto --deghost off``: the measurement alone (nothing
-    moved, no warp). Target: <= 10 % of the merge.
+    a still stack with ``--align auto --deghost auto``: the quick check, and the
+    deghosting test that finds nothing (no warp, no re-merge). Target: <= 10 % of the
+    merge. (The alignment's share alone is reported too.)
 ``moving``
     every bracket but the reference shifted (up to 8 px) and rotated (up to 0.5 deg),
     ``--align auto --deghost auto``. Targets: alignment <= 0.5 s per moved bracket,
@@ -78,17 +79,21 @@ def main(argv: list[str] | None = None) -> int:
     height, width = (int(v) for v in args.size.split("x"))
     stack, _ = bracket_stack(height, width, args.brackets)
     response = true_response()
-    merge_stack(moved(bracket_stack(64 * 6, 64 * 8, 3)[0]), response=response)  # compile
-    static = best(stack, MergeOptions(deghost="off"), args.repeats, response)
+    auto = MergeOptions(align="auto", deghost="auto")  # spelt out: whatever the defaults
+    merge_stack(moved(bracket_stack(64 * 6, 64 * 8, 3)[0]), auto, response=response)  # jit
+    static = best(stack, auto, args.repeats, response)
     moving_stack = moved(stack)
     del stack
-    moving = best(moving_stack, MergeOptions(), args.repeats, response)
+    moving = best(moving_stack, auto, args.repeats, response)
     rows = {
-        "static auto: measurement / merge": static["align"] / static["merge"],
+        "static auto: (align + deghost) / merge":
+            (static["align"] + static["deghost"]) / static["merge"],
+        "static auto: align / merge": static["align"] / static["merge"],
         "moving: alignment per moved bracket (s)": moving["align"] / max(1, moving["moved"]),
         "moving: deghosting / merge": moving["deghost"] / moving["merge"],
     }
-    targets = {"static auto: measurement / merge": 0.10,
+    targets = {"static auto: (align + deghost) / merge": 0.10,
+               "static auto: align / merge": 0.10,
                "moving: alignment per moved bracket (s)": 0.5,
                "moving: deghosting / merge": 1.0}
     print(f"{args.brackets} brackets of {height}x{width}, {threads()} threads, "

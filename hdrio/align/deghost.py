@@ -49,6 +49,20 @@ LIMIT = 0.7
 of :func:`comparametric_correction` (motion, not a response error)."""
 MIN_SAMPLES = 8
 """Cells with fewer usable samples of a bracket are not judged (kept)."""
+SUSPECT = 4.0
+"""A sample's ``d^2`` above this (two standard deviations) is looked at more closely: is
+some channel clipped nearby (:data:`CLIP_RADIUS`)?"""
+CLIP_RADIUS = 2
+"""Pixels: a sample this close to a channel above the well-exposed codes (in either
+bracket compared) says nothing when it disagrees (JPEG's chroma is half resolution and
+its blocks ring)."""
+BRIGHT = 0.85
+BRIGHT_RADIUS = 4
+"""... and this close when the sample is itself bright (some channel above
+:data:`BRIGHT` of the well-exposed codes): a camera's highlight roll-off and sharpening
+bend the bright pixels around a clipped region (frobisher_001's window sill, 4 px from
+the clipped sky in the 8 s JPEG, half as bright as the 1 s one says). Farther or darker
+samples keep counting: people walking in front of a bright window are motion."""
 
 
 @njit(cache=True, nogil=True)
@@ -67,15 +81,46 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
     return low, high
 
 
+@njit(cache=True, nogil=True)
+def _clipped_near(codes, j, y, x, high, radius):  # pragma: no cover - compiled
+    """Whether some channel of bracket ``j`` is above ``high`` within ``radius`` pixels of
+    ``(y, x)`` (within :data:`BRIGHT_RADIUS` when ``(y, x)`` is itself bright: above
+    :data:`BRIGHT` of ``high``)."""
+    height, width, channels = codes.shape[1], codes.shape[2], codes.shape[3]
+    for c in range(channels):
+        if codes[j, y, x, c] > BRIGHT * high:
+            radius = BRIGHT_RADIUS
+    for yy in range(max(0, y - radius), min(height, y + radius + 1)):
+        for xx in range(max(0, x - radius), min(width, x + radius + 1)):
+            for c in range(channels):
+                if codes[j, yy, xx, c] > high:
+                    return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _near(codes, j, y, x, high, radius, known):  # pragma: no cover - compiled
+    """:func:`_clipped_near`, remembered in ``known[j]`` (-1: not yet asked) for one sample."""
+    if known[j] < 0:
+        known[j] = 1 if _clipped_near(codes, j, y, x, high, radius) else 0
+    return known[j] == 1
+
+
 @njit(parallel=True, cache=True, nogil=True)
-def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, sums,
-                 counts, takeovers):  # pragma: no cover - compiled
+def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, high,
+                 suspect, sums, counts, takeovers):  # pragma: no cover - compiled
     """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
     3x3 neighbourhood (0 inside it) when the brackets were ``resampled``: a resampled
     bracket differs from the reference at sharp edges by a fraction of a pixel's blur,
-    which is not motion. Otherwise from the reference's own estimate (9x fewer reads)."""
+    which is not motion. Otherwise from the reference's own estimate (9x fewer reads).
+
+    A sample whose ``d^2`` is above ``suspect`` is left out for a channel when either
+    bracket compared has some channel above ``high`` within :data:`CLIP_RADIUS` pixels: a
+    camera bends the other channels next to a clipped one (highlight roll-off,
+    white balance of a clipped channel, JPEG's ringing and half-resolution chroma),
+    and that is not motion. (Asked only of suspect samples: a few per cent of them.)"""
     count, height, width, channels = codes.shape
     rows, cols = sums.shape[1], sums.shape[2]
     for cy in prange(rows):
@@ -83,11 +128,14 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
         start_high = np.empty(channels)
         start_var = np.empty(channels)
         low = np.empty(channels)
-        high = np.empty(channels)
+        high_e = np.empty(channels)
         chain_var = np.empty(channels)
+        chain = np.empty(channels, np.int64)
+        known = np.empty(count, np.int8)
         for cx in range(cols):
             for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
+                    known[:] = -1
                     for c in range(channels):
                         z = codes[reference, y, x, c]
                         start_var[c] = variance[reference, c, z]
@@ -99,8 +147,9 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                 start_low[c] = start_high[c] = estimates[reference, c, z]
                     for direction in (-1, 1):
                         low[:] = start_low
-                        high[:] = start_high
+                        high_e[:] = start_high
                         chain_var[:] = start_var
+                        chain[:] = reference
                         j = reference + direction
                         while 0 <= j < count:
                             total = 0.0
@@ -112,19 +161,26 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                     continue  # clipped or black here: says nothing
                                 e = estimates[j, c, z]
                                 if np.isfinite(chain_var[c]):
-                                    d = max(0.0, e - high[c], low[c] - e)
-                                    total += min(d * d / (v + chain_var[c]), cap)
+                                    d = max(0.0, e - high_e[c], low[c] - e)
+                                    d2 = d * d / (v + chain_var[c])
+                                    if d2 > suspect and (
+                                            _near(codes, j, y, x, high, CLIP_RADIUS, known)
+                                            or _near(codes, chain[c], y, x, high,
+                                                     CLIP_RADIUS, known)):
+                                        continue  # next to clipping: says nothing
+                                    total += min(d2, cap)
                                     used += 1
                                     continue
                                 # The reference is clipped or black here: j takes over.
                                 chain_var[c] = v
+                                chain[c] = j
                                 if direction < 0:  # a shorter bracket for a clipped one
                                     takeovers[j, cy, cx] += 1
                                 if resampled:
-                                    low[c], high[c] = _local_range(
+                                    low[c], high_e[c] = _local_range(
                                         codes, estimates, variance, j, y, x, c)
                                 else:
-                                    low[c] = high[c] = e
+                                    low[c] = high_e[c] = e
                             sums[j, cy, cx] += total
                             counts[j, cy, cx] += used
                             j += direction
@@ -258,8 +314,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     takeovers = np.zeros((count, rows, cols), np.int64)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
-    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, sums,
-                 counts, takeovers)
+    _, high = well_exposed_codes(int(variance.shape[2]) - 1)
+    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, high,
+                 SUSPECT, sums, counts, takeovers)
     mean = sums / np.maximum(counts, 1)
     judged = counts >= MIN_SAMPLES
     # The noise model's scale, checked on the stack itself: most cells of a bracket are
