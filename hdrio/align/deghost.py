@@ -49,6 +49,11 @@ LIMIT = 0.7
 of :func:`comparametric_correction` (motion, not a response error)."""
 MIN_SAMPLES = 8
 """Cells with fewer usable samples of a bracket are not judged (kept)."""
+COARSE = 4
+"""The quick look's cells are this many cells wide, its samples this many times sparser."""
+QUICK = 5.0
+"""A coarse cell is looked at finely when its mean capped ``d^2`` is above this (times
+the bracket's scale): about one sample of its sixteen far out."""
 SUSPECT = 4.0
 """A sample's ``d^2`` above this (two standard deviations) is looked at more closely: is
 some channel clipped nearby (:data:`CLIP_RADIUS`)?"""
@@ -108,8 +113,9 @@ def _near(codes, j, y, x, high, radius, known):  # pragma: no cover - compiled
 
 @njit(parallel=True, cache=True, nogil=True)
 def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, high,
-                 suspect, sums, counts, takeovers):  # pragma: no cover - compiled
-    """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
+                 suspect, todo, sums, counts, takeovers):  # pragma: no cover - compiled
+    """Per bracket and cell (those ``todo``), the sum and count of the capped ``d^2`` of
+    its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
     3x3 neighbourhood (0 inside it) when the brackets were ``resampled``: a resampled
@@ -133,6 +139,8 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
         chain = np.empty(channels, np.int64)
         known = np.empty(count, np.int8)
         for cx in range(cols):
+            if not todo[cy, cx]:
+                continue
             for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
                     known[:] = -1
@@ -220,7 +228,7 @@ def _log_ratios(codes, estimates, variance, reference, target, stride, limit, su
 
 
 def comparametric_correction(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray,
-                             reference: int, samples: int = 250_000) -> np.ndarray:
+                             reference: int, samples: int = 100_000) -> np.ndarray:
     """``estimates`` with each bracket's systematic disagreement with the reference (a
     function of its code value: the response's error, an exposure time's rounding)
     divided out, bracket by bracket outwards from the reference.
@@ -309,25 +317,40 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     """
     count, height, width, _ = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
-    sums = np.zeros((count, rows, cols))
-    counts = np.zeros((count, rows, cols), np.int64)
-    takeovers = np.zeros((count, rows, cols), np.int64)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
     _, high = well_exposed_codes(int(variance.shape[2]) - 1)
-    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, high,
-                 SUSPECT, sums, counts, takeovers)
-    mean = sums / np.maximum(counts, 1)
-    judged = counts >= MIN_SAMPLES
-    # The noise model's scale, checked on the stack itself: most cells of a bracket are
-    # still, so their median mean d^2 says how far the model under-states the noise
-    # (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG against its 8 s). The
-    # threshold is raised by that factor, up to SCALED_MAX (a moving object's cells sit
-    # near CAP).
-    limits = np.full(count, threshold)
+
+    def test(size: int, stride: int, todo: np.ndarray):
+        shape = (count, *todo.shape)
+        sums, counts, takeovers = np.zeros(shape), np.zeros(shape, np.int64), \
+            np.zeros(shape, np.int64)
+        _consistency(codes, estimates, variance, reference, size, stride, CAP, resampled,
+                     high, SUSPECT, todo, sums, counts, takeovers)
+        return sums / np.maximum(counts, 1), counts, takeovers
+
+    # A quick look first (:data:`COARSE`): cells that many times wider, samples that many
+    # times sparser (the same count a cell). Its median cell says how far the noise model
+    # under-states the noise (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG
+    # against its 8 s); the threshold is raised by that factor, up to SCALED_MAX (a moving
+    # object's cells sit near CAP). Only the coarse cells where a few samples disagree
+    # (mean above QUICK, so raised), and their neighbours, are tested finely: on a still
+    # stack, none.
+    size = cell * COARSE
+    coarse, coarse_counts, _ = test(size, STRIDE * COARSE,
+                                    np.ones((-(-height // size), -(-width // size)), bool))
+    coarse_judged = coarse_counts >= MIN_SAMPLES
+    scale = np.ones(count)
     for j in range(count):
-        if judged[j].any():
-            limits[j] = min(SCALED_MAX, threshold * max(1.0, float(np.median(mean[j][judged[j]]))))
+        if coarse_judged[j].any():
+            scale[j] = max(1.0, float(np.median(coarse[j][coarse_judged[j]])))
+    limits = np.minimum(SCALED_MAX, threshold * scale)
+    suspect = (coarse > (QUICK * scale)[:, None, None]) & coarse_judged
+    suspect[reference] = False
+    suspect = scipy.ndimage.binary_dilation(suspect.any(axis=0), np.ones((3, 3), bool))
+    todo = np.repeat(np.repeat(suspect, COARSE, axis=0), COARSE, axis=1)[:rows, :cols]
+    mean, counts, takeovers = test(cell, STRIDE, np.ascontiguousarray(todo))
+    judged = counts >= MIN_SAMPLES
     flagged = (mean > limits[:, None, None]) & judged
     flagged[reference] = False
     keep = np.ones((count, rows, cols), np.float32)

@@ -25,8 +25,8 @@ POINTS = 20_000
 STILL = 0.05
 """Pixels: half of ``--align auto``'s 0.1 px (one Gauss-Newton step from the identity
 is exact to first order only)."""
-USABLE_STRIDE = 8
-"""Every this-many-th pixel each way is looked at to tell how much of a bracket is usable."""
+USABLE_SAMPLES = 65536
+"""About this many pixels of each bracket (a strided grid) tell how much of it is usable."""
 
 
 @njit(cache=True, nogil=True)
@@ -76,7 +76,7 @@ def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return rows * STRIDE + STRIDE // 2, cols * STRIDE + STRIDE // 2
 
 
-def usable(codes: np.ndarray, code_max: int, stride: int = USABLE_STRIDE) -> np.ndarray:
+def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
     """``(h, w)``: every ``stride``-th pixel of one bracket ``(H, W, C)``, whether every
     channel is well exposed (unclipped, above the noise)."""
     low, high = well_exposed_codes(code_max)
@@ -89,7 +89,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
     its nearest registrable neighbour towards ``reference``, and the brackets too little
     of which is usable to register (:func:`hdrio.align.registration.unusable`, on a
-    sample of every :data:`USABLE_STRIDE`-th pixel): ``{bracket: why}``, not tested.
+    grid of about :data:`USABLE_SAMPLES` pixels): ``{bracket: why}``, not tested.
 
     Parameters
     ----------
@@ -112,13 +112,14 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     u = (xs - (width - 1) / 2.0) / half
     v = (ys - (height - 1) / 2.0) / half
     refused: dict[int, str] = {}
-    scale = (USABLE_STRIDE / base_factor(height, width)) ** 2
-    masks = {reference: usable(codes[reference], code_max)}
+    stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
+    scale = (stride / base_factor(height, width)) ** 2
+    masks = {reference: usable(codes[reference], code_max, stride)}
     pairs = []
     for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
         k = reference
         for j in side:
-            masks[j] = usable(codes[j], code_max)
+            masks[j] = usable(codes[j], code_max, stride)
             why = unusable(masks[k], masks[j], scale)
             if why is not None:
                 refused[j] = why
