@@ -58,9 +58,13 @@ SUSPECT = 4.0
 """A sample's ``d^2`` above this (two standard deviations) is looked at more closely: is
 some channel clipped nearby (:data:`CLIP_RADIUS`)?"""
 CLIP_RADIUS = 2
-"""Pixels: a sample this close to a channel above the well-exposed codes (in either
-bracket compared) says nothing when it disagrees (JPEG's chroma is half resolution and
-its blocks ring)."""
+"""Pixels: a sample this close to a channel above the well-exposed codes or at black
+(:data:`BLACK`), in either bracket compared, says nothing when it disagrees (JPEG's
+chroma is half resolution and its blocks ring; a colour clipped at black in two
+channels bends the third: the truth harness's StillLife JPEG, its saturated reds, 10 %
+flagged)."""
+BLACK = 0.01
+"""Codes at most this fraction of ``Z_max`` are clipped at black."""
 BRIGHT = 0.85
 BRIGHT_RADIUS = 4
 """... and this close when the sample is itself bright (some channel above
@@ -87,10 +91,10 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
 
 
 @njit(cache=True, nogil=True)
-def _clipped_near(codes, j, y, x, high, radius):  # pragma: no cover - compiled
-    """Whether some channel of bracket ``j`` is above ``high`` within ``radius`` pixels of
-    ``(y, x)`` (within :data:`BRIGHT_RADIUS` when ``(y, x)`` is itself bright: above
-    :data:`BRIGHT` of ``high``)."""
+def _clipped_near(codes, j, y, x, black, high, radius):  # pragma: no cover - compiled
+    """Whether some channel of bracket ``j`` is above ``high`` or at most ``black``
+    within ``radius`` pixels of ``(y, x)`` (within :data:`BRIGHT_RADIUS` when ``(y, x)``
+    is itself bright: above :data:`BRIGHT` of ``high``)."""
     height, width, channels = codes.shape[1], codes.shape[2], codes.shape[3]
     for c in range(channels):
         if codes[j, y, x, c] > BRIGHT * high:
@@ -98,22 +102,23 @@ def _clipped_near(codes, j, y, x, high, radius):  # pragma: no cover - compiled
     for yy in range(max(0, y - radius), min(height, y + radius + 1)):
         for xx in range(max(0, x - radius), min(width, x + radius + 1)):
             for c in range(channels):
-                if codes[j, yy, xx, c] > high:
+                z = codes[j, yy, xx, c]
+                if z > high or z <= black:
                     return True
     return False
 
 
 @njit(cache=True, nogil=True)
-def _near(codes, j, y, x, high, radius, known):  # pragma: no cover - compiled
+def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - compiled
     """:func:`_clipped_near`, remembered in ``known[j]`` (-1: not yet asked) for one sample."""
     if known[j] < 0:
-        known[j] = 1 if _clipped_near(codes, j, y, x, high, radius) else 0
+        known[j] = 1 if _clipped_near(codes, j, y, x, black, high, radius) else 0
     return known[j] == 1
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, high,
-                 suspect, todo, sums, counts, takeovers):  # pragma: no cover - compiled
+def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, black,
+                 high, suspect, todo, sums, counts, takeovers):  # pragma: no cover - compiled
     """Per bracket and cell (those ``todo``), the sum and count of the capped ``d^2`` of
     its samples.
 
@@ -172,8 +177,9 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                     d = max(0.0, e - high_e[c], low[c] - e)
                                     d2 = d * d / (v + chain_var[c])
                                     if d2 > suspect and (
-                                            _near(codes, j, y, x, high, CLIP_RADIUS, known)
-                                            or _near(codes, chain[c], y, x, high,
+                                            _near(codes, j, y, x, black, high, CLIP_RADIUS,
+                                                  known)
+                                            or _near(codes, chain[c], y, x, black, high,
                                                      CLIP_RADIUS, known)):
                                         continue  # next to clipping: says nothing
                                     total += min(d2, cap)
@@ -319,14 +325,16 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     rows, cols = -(-height // cell), -(-width // cell)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
-    _, high = well_exposed_codes(int(variance.shape[2]) - 1)
+    code_max = int(variance.shape[2]) - 1  # the tables have a row per code value
+    _, high = well_exposed_codes(code_max)
+    black = int(BLACK * code_max)
 
     def test(size: int, stride: int, todo: np.ndarray):
         shape = (count, *todo.shape)
         sums, counts, takeovers = np.zeros(shape), np.zeros(shape, np.int64), \
             np.zeros(shape, np.int64)
         _consistency(codes, estimates, variance, reference, size, stride, CAP, resampled,
-                     high, SUSPECT, todo, sums, counts, takeovers)
+                     black, high, SUSPECT, todo, sums, counts, takeovers)
         return sums / np.maximum(counts, 1), counts, takeovers
 
     # A quick look first (:data:`COARSE`): cells that many times wider, samples that many
