@@ -12,11 +12,13 @@ everywhere gives the kernel's result) and ``t_j`` the table's term. A dropped br
 (``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
 object that clips says nothing about the scene behind it. Weights are given on a grid
 of cells and interpolated bilinearly between cell centres (the masks are feathered:
-no seam). Where some channel is left with no weight but a dropped bracket had some,
-the pixel keeps the kernel's merge (the dropped bracket was the only one to see it: a
-shorter bracket under a clipped reference; with one channel taken from elsewhere, the
-cloud edge of frobisher_001 turned magenta and a cell grey); a channel no bracket saw
-takes the estimate of the most-kept bracket not saturated there.
+no seam). Where some channel is left with no weight because every kept bracket is
+saturated there, but a dropped bracket had weight, the pixel keeps the kernel's merge
+(the dropped bracket was the only one to see it: a shorter bracket under a clipped
+reference; with one channel taken from elsewhere, the cloud edge of frobisher_001
+turned magenta and a cell grey); otherwise a channel with no weight (a dark reference,
+a channel no bracket saw) takes the estimate of the most-kept bracket not saturated
+there.
 """
 
 from __future__ import annotations
@@ -79,7 +81,8 @@ def _remerge(codes, keep, touched, cell, terms, estimates, code_max, per_channel
                         if denominator > 0.0:
                             value = numerator / denominator
                         else:
-                            only_dropped |= unmasked > 0.0
+                            # Every kept bracket saturated here, a dropped one not.
+                            only_dropped |= unmasked > 0.0 and (best < 0 or m[best] == 0.0)
                             j = best if best >= 0 else int(np.argmax(m))
                             value = estimates[j, c, codes[j, y, x, c]]
                         if log_domain:
