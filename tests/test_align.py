@@ -19,7 +19,7 @@ from hdrio.synthetic import radiance_error, well_exposed
 H, W = 300, 400
 MARGIN = 24  # pixels: the cells a warped bracket does not fully cover (8-px cells + 10 px)
 
-AUTO = MergeOptions(align="auto", deghost="auto")  # both off by default
+AUTO = MergeOptions(align="auto", deghost="auto")  # the defaults, spelt out
 
 
 @pytest.fixture(scope="module")
@@ -321,3 +321,26 @@ def test_ward2003_stays_put_without_evidence():
     rng = np.random.default_rng(1)
     reference = rng.uniform(20, 230, (96, 128))
     assert align_Ward2003(reference, np.full((96, 128), 255.0), 5) == (0, 0)
+
+
+def test_masked_remerge_keeps_the_merge_where_only_a_dropped_bracket_saw():
+    from hdrio.merge.masked import remerge_masked
+
+    # Two brackets (1 s, 4 s), one channel's tables for all three: weight 1 on codes
+    # 1..254, none at 255 (Z_max); estimate z / dt.
+    times = np.array([1.0, 4.0])
+    z = np.arange(256.0)
+    weight = np.where((z > 0) & (z < 255), 1.0, 0.0)
+    estimates = np.stack([np.repeat((z / t)[None], 3, 0) for t in times])
+    terms = weight * estimates + 1j * weight
+    codes = np.zeros((2, 16, 16, 3), np.uint8)
+    codes[0] = 100
+    codes[1] = 255  # the reference, clipped: only the shorter bracket sees the scene
+    keep = np.ones((2, 2, 2))
+    keep[0] = 0.0  # ... and it is dropped
+    radiance = np.full((16, 16, 3), 7.0, np.float32)  # stands for the kernel's merge
+    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    assert np.all(radiance == 7.0)  # not a grey cell from the clipped reference
+    codes[1] = 200  # the reference sees it: the dropped bracket's view is replaced
+    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    assert np.allclose(radiance, 200 / 4.0)

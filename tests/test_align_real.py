@@ -8,7 +8,7 @@ from hdrio.align.registration import estimate_alignment
 from hdrio.io.brackets import read_brackets
 from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
 
-AUTO = MergeOptions(align="auto", deghost="auto")  # both off by default
+AUTO = MergeOptions(align="auto", deghost="auto")  # the defaults, spelt out
 
 
 def _stack(shared_data, name):

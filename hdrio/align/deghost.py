@@ -50,7 +50,10 @@ of :func:`comparametric_correction` (motion, not a response error)."""
 MIN_SAMPLES = 8
 """Cells with fewer usable samples of a bracket are not judged (kept)."""
 COARSE = 4
-"""The quick look's cells are this many cells wide, its samples this many times sparser."""
+"""The quick look's samples are at least this many times sparser than the fine test's,
+its cells as many times wider (the same count of samples a cell)."""
+QUICK_SAMPLES = 100_000
+"""... and sparser still on large images: about this many samples a bracket."""
 QUICK = 5.0
 """A coarse cell is looked at finely when its mean capped ``d^2`` is above this (times
 the bracket's scale): about one sample of its sixteen far out."""
@@ -344,8 +347,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     # object's cells sit near CAP). Only the coarse cells where a few samples disagree
     # (mean above QUICK, so raised), and their neighbours, are tested finely: on a still
     # stack, none.
-    size = cell * COARSE
-    coarse, coarse_counts, _ = test(size, STRIDE * COARSE,
+    stride = max(STRIDE * COARSE, int(math.sqrt(height * width / QUICK_SAMPLES)))
+    size = stride * cell // STRIDE  # the fine test's samples a cell
+    coarse, coarse_counts, _ = test(size, stride,
                                     np.ones((-(-height // size), -(-width // size)), bool))
     coarse_judged = coarse_counts >= MIN_SAMPLES
     scale = np.ones(count)
@@ -356,7 +360,13 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     suspect = (coarse > (QUICK * scale)[:, None, None]) & coarse_judged
     suspect[reference] = False
     suspect = scipy.ndimage.binary_dilation(suspect.any(axis=0), np.ones((3, 3), bool))
-    todo = np.repeat(np.repeat(suspect, COARSE, axis=0), COARSE, axis=1)[:rows, :cols]
+    # Fine cells touching a suspect coarse one.
+    fine_rows = np.minimum(np.arange(rows) * cell // size, suspect.shape[0] - 1)
+    fine_cols = np.minimum(np.arange(cols) * cell // size, suspect.shape[1] - 1)
+    last_rows = np.minimum((np.arange(rows) * cell + cell - 1) // size, suspect.shape[0] - 1)
+    last_cols = np.minimum((np.arange(cols) * cell + cell - 1) // size, suspect.shape[1] - 1)
+    todo = (suspect[fine_rows][:, fine_cols] | suspect[last_rows][:, last_cols]
+            | suspect[fine_rows][:, last_cols] | suspect[last_rows][:, fine_cols])
     mean, counts, takeovers = test(cell, STRIDE, np.ascontiguousarray(todo))
     judged = counts >= MIN_SAMPLES
     flagged = (mean > limits[:, None, None]) & judged

@@ -2,9 +2,10 @@
 pyramid on a still stack.
 
 The strongest gradients of the reference are found on a strided sample (every
-:data:`STRIDE`-th row and column), then, at up to :data:`POINTS` of them, each bracket's
-linearised log radiance and the reference's full-resolution gradient are read (five
-pixels a point: the whole check reads a few hundred kilobytes, not the brackets). One
+:data:`STRIDE`-th row and column or sparser, about :data:`GRID` pixels), then, at up to
+:data:`POINTS` of them, each bracket's linearised log radiance and the reference's
+full-resolution gradient are read (five pixels a point: the whole check reads a few
+hundred kilobytes, not the brackets). One
 Gauss-Newton step of translation + rotation from the identity, Huber-weighted, with a
 free offset, estimates each bracket's motion against its neighbour towards the
 reference; when every estimate moves the image's corners by less than :data:`STILL`
@@ -21,6 +22,8 @@ from hdrio.align.registration import unusable
 from hdrio.skips import well_exposed_codes
 
 STRIDE = 4
+"""At least; larger images are sampled more sparsely, about :data:`GRID` pixels."""
+GRID = 400_000
 POINTS = 20_000
 STILL = 0.05
 """Pixels: half of ``--align auto``'s 0.1 px (one Gauss-Newton step from the identity
@@ -65,7 +68,8 @@ def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no
 
 def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample."""
-    grid = codes[STRIDE // 2::STRIDE, STRIDE // 2::STRIDE]
+    stride = max(STRIDE, int(np.sqrt(codes.shape[0] * codes.shape[1] / GRID)))
+    grid = codes[stride // 2::stride, stride // 2::stride]
     channels = np.arange(grid.shape[-1])
     image = np.log(np.maximum(linear[channels, grid].sum(axis=-1), 1e-30))
     gy, gx = np.gradient(image)
@@ -73,7 +77,7 @@ def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarr
     count = min(POINTS, strength.size)
     index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
     rows, cols = np.divmod(index, grid.shape[1])
-    return rows * STRIDE + STRIDE // 2, cols * STRIDE + STRIDE // 2
+    return rows * stride + stride // 2, cols * stride + stride // 2
 
 
 def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:

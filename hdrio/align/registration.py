@@ -22,7 +22,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.ndimage
 
-from hdrio.align.lucaskanade import corner_motion, refine_LucasKanade, rescale, residual
+from hdrio.align.lucaskanade import (
+    corner_motion,
+    refine_LucasKanade,
+    rescale,
+    residual,
+    strongest,
+)
 from hdrio.align.pyramid import (
     BaseImage,
     base_factor,
@@ -211,6 +217,29 @@ def unusable(valid_k: np.ndarray, valid_j: np.ndarray, scale: float = 1.0) -> st
     return None
 
 
+TEXTURE = 0.02
+"""A shift is measurable only when, at the points it is measured on, the gradients along
+x and along y and a constant (the exposure offset) are not nearly collinear: the smallest
+eigenvalue of their normalised Gram matrix is above this. (An exponential ramp, log-linear
+along x, has the same x gradient everywhere: any x shift fits as well as an offset, and
+on 48x64 pixels one 2.8 px off fitted the noise 20 % better than none.)"""
+
+
+def _textured(image: np.ndarray, index: np.ndarray) -> bool:
+    """Whether ``image``'s gradients at the flat ``index`` pin a translation down
+    (:data:`TEXTURE`)."""
+    if index.size < 3:
+        return False
+    gy, gx = np.gradient(image)
+    columns = np.stack([gx.reshape(-1)[index], gy.reshape(-1)[index],
+                        np.ones(index.size)], axis=1).astype(np.float64)
+    norms = np.linalg.norm(columns, axis=0)
+    if np.any(norms == 0):
+        return False
+    gram = (columns / norms).T @ (columns / norms)
+    return float(np.linalg.eigvalsh(gram)[0]) > TEXTURE
+
+
 def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
                    guess: np.ndarray | None, model: str, code_max: int
                    ) -> tuple[np.ndarray, str | None]:
@@ -224,7 +253,12 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
     step = refine_LucasKanade(pyramid_k, pyramid_j, guess, model)
     still = np.eye(3)
     fine_k, fine_j = pyramid_k[0], pyramid_j[0]
-    moved, unmoved = (residual(*fine_k, *fine_j, step), residual(*fine_k, *fine_j, still))
+    points = strongest(*fine_k)
+    if corner_motion(step, *fine_k[0].shape) > 0 and not _textured(fine_k[0], points):
+        return still, ("a smooth gradient: a shift along it is a change of brightness, "
+                       "nothing to register")
+    moved, unmoved = (residual(*fine_k, *fine_j, step, index=points),
+                      residual(*fine_k, *fine_j, still, index=points))
     if not (np.isfinite(moved) and np.isfinite(unmoved)):
         return still, "too few well-exposed edges in common to judge a shift"
     # Keep the estimate only if it fits clearly better than no motion at all: where
@@ -237,8 +271,9 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
     top = len(pyramid_k) - 1
     coarse = rescale(step, 0.5**top)
     if top > 0 and corner_motion(coarse, *pyramid_k[top][0].shape) > 1.0:
-        moved_c = residual(*pyramid_k[top], *pyramid_j[top], coarse)
-        unmoved_c = residual(*pyramid_k[top], *pyramid_j[top], still)
+        points = strongest(*pyramid_k[top])
+        moved_c = residual(*pyramid_k[top], *pyramid_j[top], coarse, index=points)
+        unmoved_c = residual(*pyramid_k[top], *pyramid_j[top], still, index=points)
         if not moved_c <= unmoved_c:
             return still, (f"the shift fits the fine level only (misfit {moved_c:.3f} "
                            f"against {unmoved_c:.3f} unmoved at the coarsest)")
