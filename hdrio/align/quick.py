@@ -88,12 +88,21 @@ def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
     return np.all((grid >= low) & (grid <= high), axis=-1)
 
 
-def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int
-                ) -> tuple[bool, dict[int, str]]:
+def usable_masks(codes: np.ndarray, code_max: int) -> list[np.ndarray]:
+    """:func:`usable` of every bracket of ``codes`` ``(P, H, W, C)`` on the grid of about
+    :data:`USABLE_SAMPLES` pixels (the grid
+    :func:`hdrio.align.registration.reference_bracket` scores on)."""
+    height, width = codes.shape[1:3]
+    stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
+    return [usable(codes[j], code_max, stride) for j in range(codes.shape[0])]
+
+
+def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int,
+                masks: list[np.ndarray] | None = None) -> tuple[bool, dict[int, str]]:
     """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
     its nearest registrable neighbour towards ``reference``, and the brackets too little
-    of which is usable to register (:func:`hdrio.align.registration.unusable`, on a
-    grid of about :data:`USABLE_SAMPLES` pixels): ``{bracket: why}``, not tested.
+    of which is usable to register (:func:`hdrio.align.registration.unusable`, on
+    ``masks``: :func:`usable_masks`): ``{bracket: why}``, not tested.
 
     Parameters
     ----------
@@ -118,12 +127,12 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     refused: dict[int, str] = {}
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     scale = (stride / base_factor(height, width)) ** 2
-    masks = {reference: usable(codes[reference], code_max, stride)}
+    if masks is None:
+        masks = usable_masks(codes, code_max)
     pairs = []
     for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
         k = reference
         for j in side:
-            masks[j] = usable(codes[j], code_max, stride)
             why = unusable(masks[k], masks[j], scale)
             if why is not None:
                 refused[j] = why

@@ -119,18 +119,23 @@ class Alignment:
         return lines
 
 
-def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536) -> int:
+def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
+                      masks: list[np.ndarray] | None = None) -> int:
     """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
     channel well exposed (:data:`hdrio.skips.WELL_EXPOSED`, on a grid of about
-    ``samples`` pixels); the one nearest the middle on a tie."""
+    ``samples`` pixels, or ``masks`` of them already made); the one nearest the middle on
+    a tie."""
     count, height, width, _ = codes.shape
     step = max(1, int(math.sqrt(height * width / samples)))
     low, high = well_exposed_codes(code_max)
     middle = (count - 1) / 2.0
     scores = []
     for j in range(count):
-        grid = codes[j, step // 2::step, step // 2::step]
-        good = np.all((grid >= low) & (grid <= high), axis=-1)
+        if masks is not None:
+            good = masks[j]
+        else:
+            grid = codes[j, step // 2::step, step // 2::step]
+            good = np.all((grid >= low) & (grid <= high), axis=-1)
         scores.append((int(np.count_nonzero(good)), -abs(j - middle)))
     return max(range(count), key=lambda j: scores[j])
 
