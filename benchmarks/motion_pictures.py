@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args[0] if args else "docs/images")
     for name, (top, left, height, width) in CROPS.items():
         before = merged(name, MergeOptions(align="off", deghost="off"))
-        after = merged(name, MergeOptions())
+        after = merged(name, MergeOptions(align="auto", deghost="auto"))
         panels = []
         for result in (before, after):
             pixels = render_preview(result.radiance, "reinhard-global", result.options.colourspace)

@@ -98,14 +98,10 @@ class MergeOptions:
     # written as the EXR layer "uncertainty".
     uncertainty: bool = False
     # Registration and deghosting (hdrio.align): docs/motion.md.
-    # auto | off | translation | euclidean | homography. Off by default for now: on the
-    # truth harness's still GoldenGate/dorf0 stack (at 250 px) auto warped the longest,
-    # nearly saturated bracket by (-31, -31) px (p99 error 45 % against 2.4 %).
-    align: str = "off"
-    # auto | off. Off by default for now: on frobisher_001 (a still, tripod scene whose
-    # window is clipped in the long brackets) auto drops a bracket at 11 % of the pixels
-    # and leaves magenta fringes and a grey cell at the clipped cloud edge (docs/motion.md).
-    deghost: str = "off"
+    # auto | off | translation | euclidean | homography.
+    align: str = "auto"
+    # auto | off.
+    deghost: str = "auto"
     motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
 
     def __post_init__(self) -> None:

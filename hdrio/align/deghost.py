@@ -49,6 +49,32 @@ LIMIT = 0.7
 of :func:`comparametric_correction` (motion, not a response error)."""
 MIN_SAMPLES = 8
 """Cells with fewer usable samples of a bracket are not judged (kept)."""
+COARSE = 4
+"""The quick look's samples are at least this many times sparser than the fine test's,
+its cells as many times wider (the same count of samples a cell)."""
+QUICK_SAMPLES = 100_000
+"""... and sparser still on large images: about this many samples a bracket."""
+QUICK = 5.0
+"""A coarse cell is looked at finely when its mean capped ``d^2`` is above this (times
+the bracket's scale): about one sample of its sixteen far out."""
+SUSPECT = 4.0
+"""A sample's ``d^2`` above this (two standard deviations) is looked at more closely: is
+some channel clipped nearby (:data:`CLIP_RADIUS`)?"""
+CLIP_RADIUS = 2
+"""Pixels: a sample this close to a channel above the well-exposed codes or at black
+(:data:`BLACK`), in either bracket compared, says nothing when it disagrees (JPEG's
+chroma is half resolution and its blocks ring; a colour clipped at black in two
+channels bends the third: the truth harness's StillLife JPEG, its saturated reds, 10 %
+flagged)."""
+BLACK = 0.01
+"""Codes at most this fraction of ``Z_max`` are clipped at black."""
+BRIGHT = 0.85
+BRIGHT_RADIUS = 4
+"""... and this close when the sample is itself bright (some channel above
+:data:`BRIGHT` of the well-exposed codes): a camera's highlight roll-off and sharpening
+bend the bright pixels around a clipped region (frobisher_001's window sill, 4 px from
+the clipped sky in the 8 s JPEG, half as bright as the 1 s one says). Farther or darker
+samples keep counting: people walking in front of a bright window are motion."""
 
 
 @njit(cache=True, nogil=True)
@@ -67,15 +93,48 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
     return low, high
 
 
+@njit(cache=True, nogil=True)
+def _clipped_near(codes, j, y, x, black, high, radius):  # pragma: no cover - compiled
+    """Whether some channel of bracket ``j`` is above ``high`` or at most ``black``
+    within ``radius`` pixels of ``(y, x)`` (within :data:`BRIGHT_RADIUS` when ``(y, x)``
+    is itself bright: above :data:`BRIGHT` of ``high``)."""
+    height, width, channels = codes.shape[1], codes.shape[2], codes.shape[3]
+    for c in range(channels):
+        if codes[j, y, x, c] > BRIGHT * high:
+            radius = BRIGHT_RADIUS
+    for yy in range(max(0, y - radius), min(height, y + radius + 1)):
+        for xx in range(max(0, x - radius), min(width, x + radius + 1)):
+            for c in range(channels):
+                z = codes[j, yy, xx, c]
+                if z > high or z <= black:
+                    return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - compiled
+    """:func:`_clipped_near`, remembered in ``known[j]`` (-1: not yet asked) for one sample."""
+    if known[j] < 0:
+        known[j] = 1 if _clipped_near(codes, j, y, x, black, high, radius) else 0
+    return known[j] == 1
+
+
 @njit(parallel=True, cache=True, nogil=True)
-def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, sums,
-                 counts, takeovers):  # pragma: no cover - compiled
-    """Per bracket and cell, the sum and count of the capped ``d^2`` of its samples.
+def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, black,
+                 high, suspect, todo, sums, counts, takeovers):  # pragma: no cover - compiled
+    """Per bracket and cell (those ``todo``), the sum and count of the capped ``d^2`` of
+    its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
     3x3 neighbourhood (0 inside it) when the brackets were ``resampled``: a resampled
     bracket differs from the reference at sharp edges by a fraction of a pixel's blur,
-    which is not motion. Otherwise from the reference's own estimate (9x fewer reads)."""
+    which is not motion. Otherwise from the reference's own estimate (9x fewer reads).
+
+    A sample whose ``d^2`` is above ``suspect`` is left out for a channel when either
+    bracket compared has some channel above ``high`` within :data:`CLIP_RADIUS` pixels: a
+    camera bends the other channels next to a clipped one (highlight roll-off,
+    white balance of a clipped channel, JPEG's ringing and half-resolution chroma),
+    and that is not motion. (Asked only of suspect samples: a few per cent of them.)"""
     count, height, width, channels = codes.shape
     rows, cols = sums.shape[1], sums.shape[2]
     for cy in prange(rows):
@@ -83,11 +142,16 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
         start_high = np.empty(channels)
         start_var = np.empty(channels)
         low = np.empty(channels)
-        high = np.empty(channels)
+        high_e = np.empty(channels)
         chain_var = np.empty(channels)
+        chain = np.empty(channels, np.int64)
+        known = np.empty(count, np.int8)
         for cx in range(cols):
+            if not todo[cy, cx]:
+                continue
             for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
+                    known[:] = -1
                     for c in range(channels):
                         z = codes[reference, y, x, c]
                         start_var[c] = variance[reference, c, z]
@@ -99,8 +163,9 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                 start_low[c] = start_high[c] = estimates[reference, c, z]
                     for direction in (-1, 1):
                         low[:] = start_low
-                        high[:] = start_high
+                        high_e[:] = start_high
                         chain_var[:] = start_var
+                        chain[:] = reference
                         j = reference + direction
                         while 0 <= j < count:
                             total = 0.0
@@ -112,19 +177,27 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                                     continue  # clipped or black here: says nothing
                                 e = estimates[j, c, z]
                                 if np.isfinite(chain_var[c]):
-                                    d = max(0.0, e - high[c], low[c] - e)
-                                    total += min(d * d / (v + chain_var[c]), cap)
+                                    d = max(0.0, e - high_e[c], low[c] - e)
+                                    d2 = d * d / (v + chain_var[c])
+                                    if d2 > suspect and (
+                                            _near(codes, j, y, x, black, high, CLIP_RADIUS,
+                                                  known)
+                                            or _near(codes, chain[c], y, x, black, high,
+                                                     CLIP_RADIUS, known)):
+                                        continue  # next to clipping: says nothing
+                                    total += min(d2, cap)
                                     used += 1
                                     continue
                                 # The reference is clipped or black here: j takes over.
                                 chain_var[c] = v
+                                chain[c] = j
                                 if direction < 0:  # a shorter bracket for a clipped one
                                     takeovers[j, cy, cx] += 1
                                 if resampled:
-                                    low[c], high[c] = _local_range(
+                                    low[c], high_e[c] = _local_range(
                                         codes, estimates, variance, j, y, x, c)
                                 else:
-                                    low[c] = high[c] = e
+                                    low[c] = high_e[c] = e
                             sums[j, cy, cx] += total
                             counts[j, cy, cx] += used
                             j += direction
@@ -164,7 +237,7 @@ def _log_ratios(codes, estimates, variance, reference, target, stride, limit, su
 
 
 def comparametric_correction(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray,
-                             reference: int, samples: int = 250_000) -> np.ndarray:
+                             reference: int, samples: int = 100_000) -> np.ndarray:
     """``estimates`` with each bracket's systematic disagreement with the reference (a
     function of its code value: the response's error, an exposure time's rounding)
     divided out, bracket by bracket outwards from the reference.
@@ -253,24 +326,49 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     """
     count, height, width, _ = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
-    sums = np.zeros((count, rows, cols))
-    counts = np.zeros((count, rows, cols), np.int64)
-    takeovers = np.zeros((count, rows, cols), np.int64)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
-    _consistency(codes, estimates, variance, reference, cell, STRIDE, CAP, resampled, sums,
-                 counts, takeovers)
-    mean = sums / np.maximum(counts, 1)
-    judged = counts >= MIN_SAMPLES
-    # The noise model's scale, checked on the stack itself: most cells of a bracket are
-    # still, so their median mean d^2 says how far the model under-states the noise
-    # (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG against its 8 s). The
-    # threshold is raised by that factor, up to SCALED_MAX (a moving object's cells sit
-    # near CAP).
-    limits = np.full(count, threshold)
+    code_max = int(variance.shape[2]) - 1  # the tables have a row per code value
+    _, high = well_exposed_codes(code_max)
+    black = int(BLACK * code_max)
+
+    def test(size: int, stride: int, todo: np.ndarray):
+        shape = (count, *todo.shape)
+        sums, counts, takeovers = np.zeros(shape), np.zeros(shape, np.int64), \
+            np.zeros(shape, np.int64)
+        _consistency(codes, estimates, variance, reference, size, stride, CAP, resampled,
+                     black, high, SUSPECT, todo, sums, counts, takeovers)
+        return sums / np.maximum(counts, 1), counts, takeovers
+
+    # A quick look first (:data:`COARSE`): cells that many times wider, samples that many
+    # times sparser (the same count a cell). Its median cell says how far the noise model
+    # under-states the noise (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG
+    # against its 8 s); the threshold is raised by that factor, up to SCALED_MAX (a moving
+    # object's cells sit near CAP). Only the coarse cells where a few samples disagree
+    # (mean above QUICK, so raised), and their neighbours, are tested finely: on a still
+    # stack, none.
+    stride = max(STRIDE * COARSE, int(math.sqrt(height * width / QUICK_SAMPLES)))
+    size = stride * cell // STRIDE  # the fine test's samples a cell
+    coarse, coarse_counts, _ = test(size, stride,
+                                    np.ones((-(-height // size), -(-width // size)), bool))
+    coarse_judged = coarse_counts >= MIN_SAMPLES
+    scale = np.ones(count)
     for j in range(count):
-        if judged[j].any():
-            limits[j] = min(SCALED_MAX, threshold * max(1.0, float(np.median(mean[j][judged[j]]))))
+        if coarse_judged[j].any():
+            scale[j] = max(1.0, float(np.median(coarse[j][coarse_judged[j]])))
+    limits = np.minimum(SCALED_MAX, threshold * scale)
+    suspect = (coarse > (QUICK * scale)[:, None, None]) & coarse_judged
+    suspect[reference] = False
+    suspect = scipy.ndimage.binary_dilation(suspect.any(axis=0), np.ones((3, 3), bool))
+    # Fine cells touching a suspect coarse one.
+    fine_rows = np.minimum(np.arange(rows) * cell // size, suspect.shape[0] - 1)
+    fine_cols = np.minimum(np.arange(cols) * cell // size, suspect.shape[1] - 1)
+    last_rows = np.minimum((np.arange(rows) * cell + cell - 1) // size, suspect.shape[0] - 1)
+    last_cols = np.minimum((np.arange(cols) * cell + cell - 1) // size, suspect.shape[1] - 1)
+    todo = (suspect[fine_rows][:, fine_cols] | suspect[last_rows][:, last_cols]
+            | suspect[fine_rows][:, last_cols] | suspect[last_rows][:, fine_cols])
+    mean, counts, takeovers = test(cell, STRIDE, np.ascontiguousarray(todo))
+    judged = counts >= MIN_SAMPLES
     flagged = (mean > limits[:, None, None]) & judged
     flagged[reference] = False
     keep = np.ones((count, rows, cols), np.float32)

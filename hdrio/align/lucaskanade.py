@@ -166,17 +166,27 @@ def _level(reference, ref_valid, moving, mov_valid, warp, model, points, converg
     return to_pixels @ warp_n @ to_normal
 
 
-def residual(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
-             mov_valid: np.ndarray, warp: np.ndarray, points: int = POINTS) -> float:
-    """The robust misfit of ``warp`` on one level: the median absolute deviation of
-    ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest reference
-    gradients where both are usable (``inf`` when too few are)."""
-    h, w = reference.shape
+def strongest(reference: np.ndarray, ref_valid: np.ndarray, points: int = POINTS
+              ) -> np.ndarray:
+    """Flat indices of the ``points`` strongest gradients of ``reference`` where valid."""
     gy, gx = np.gradient(reference)
     index = np.flatnonzero(ref_valid)
     if index.size > points:
         strength = (gx * gx + gy * gy).reshape(-1)[index]
         index = index[np.argpartition(strength, -points)[-points:]]
+    return index
+
+
+def residual(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
+             mov_valid: np.ndarray, warp: np.ndarray, points: int = POINTS,
+             index: np.ndarray | None = None) -> float:
+    """The robust misfit of ``warp`` on one level: the median absolute deviation of
+    ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest reference
+    gradients where both are usable (``inf`` when too few are). ``index``: those points,
+    when already found (:func:`strongest`)."""
+    h, w = reference.shape
+    if index is None:
+        index = strongest(reference, ref_valid, points)
     py, px = np.divmod(index, w)
     mx, my = _apply(warp, px.astype(np.float64), py.astype(np.float64))
     values = np.empty(index.size)

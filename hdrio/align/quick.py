@@ -2,9 +2,10 @@
 pyramid on a still stack.
 
 The strongest gradients of the reference are found on a strided sample (every
-:data:`STRIDE`-th row and column), then, at up to :data:`POINTS` of them, each bracket's
-linearised log radiance and the reference's full-resolution gradient are read (five
-pixels a point: the whole check reads a few hundred kilobytes, not the brackets). One
+:data:`STRIDE`-th row and column or sparser, about :data:`GRID` pixels), then, at up to
+:data:`POINTS` of them, each bracket's linearised log radiance and the reference's
+full-resolution gradient are read (five pixels a point: the whole check reads a few
+hundred kilobytes, not the brackets). One
 Gauss-Newton step of translation + rotation from the identity, Huber-weighted, with a
 free offset, estimates each bracket's motion against its neighbour towards the
 reference; when every estimate moves the image's corners by less than :data:`STILL`
@@ -16,13 +17,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from hdrio.align.pyramid import base_factor
+from hdrio.align.registration import unusable
 from hdrio.skips import well_exposed_codes
 
 STRIDE = 4
+"""At least; larger images are sampled more sparsely, about :data:`GRID` pixels."""
+GRID = 400_000
 POINTS = 20_000
 STILL = 0.05
 """Pixels: half of ``--align auto``'s 0.1 px (one Gauss-Newton step from the identity
 is exact to first order only)."""
+USABLE_SAMPLES = 65536
+"""About this many pixels of each bracket (a strided grid) tell how much of it is usable."""
 
 
 @njit(cache=True, nogil=True)
@@ -61,7 +68,8 @@ def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no
 
 def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample."""
-    grid = codes[STRIDE // 2::STRIDE, STRIDE // 2::STRIDE]
+    stride = max(STRIDE, int(np.sqrt(codes.shape[0] * codes.shape[1] / GRID)))
+    grid = codes[stride // 2::stride, stride // 2::stride]
     channels = np.arange(grid.shape[-1])
     image = np.log(np.maximum(linear[channels, grid].sum(axis=-1), 1e-30))
     gy, gx = np.gradient(image)
@@ -69,12 +77,32 @@ def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarr
     count = min(POINTS, strength.size)
     index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
     rows, cols = np.divmod(index, grid.shape[1])
-    return rows * STRIDE + STRIDE // 2, cols * STRIDE + STRIDE // 2
+    return rows * stride + stride // 2, cols * stride + stride // 2
 
 
-def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int) -> bool:
-    """True when one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
-    its neighbour towards ``reference``.
+def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
+    """``(h, w)``: every ``stride``-th pixel of one bracket ``(H, W, C)``, whether every
+    channel is well exposed (unclipped, above the noise)."""
+    low, high = well_exposed_codes(code_max)
+    grid = codes[stride // 2::stride, stride // 2::stride]
+    return np.all((grid >= low) & (grid <= high), axis=-1)
+
+
+def usable_masks(codes: np.ndarray, code_max: int) -> list[np.ndarray]:
+    """:func:`usable` of every bracket of ``codes`` ``(P, H, W, C)`` on the grid of about
+    :data:`USABLE_SAMPLES` pixels (the grid
+    :func:`hdrio.align.registration.reference_bracket` scores on)."""
+    height, width = codes.shape[1:3]
+    stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
+    return [usable(codes[j], code_max, stride) for j in range(codes.shape[0])]
+
+
+def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int,
+                masks: list[np.ndarray] | None = None) -> tuple[bool, dict[int, str]]:
+    """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
+    its nearest registrable neighbour towards ``reference``, and the brackets too little
+    of which is usable to register (:func:`hdrio.align.registration.unusable`, on
+    ``masks``: :func:`usable_masks`): ``{bracket: why}``, not tested.
 
     Parameters
     ----------
@@ -88,7 +116,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     ys, xs = _points(codes[reference], linear[reference])
     n = ys.size
     reads = {}
-    for j in range(count):
+    for j in range(count):  # (refused brackets are read too: a few hundred kB)
         values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
         _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
               good)
@@ -96,15 +124,27 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     half = max(height, width) / 2.0
     u = (xs - (width - 1) / 2.0) / half
     v = (ys - (height - 1) / 2.0) / half
-    for j in range(count):
-        if j == reference:
-            continue
-        k = j + 1 if j < reference else j - 1
+    refused: dict[int, str] = {}
+    stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
+    scale = (stride / base_factor(height, width)) ** 2
+    if masks is None:
+        masks = usable_masks(codes, code_max)
+    pairs = []
+    for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
+        k = reference
+        for j in side:
+            why = unusable(masks[k], masks[j], scale)
+            if why is not None:
+                refused[j] = why
+                continue
+            pairs.append((j, k))
+            k = j
+    for j, k in pairs:
         template, gx, gy, ok_k = reads[k]
         values, _, _, ok_j = reads[j]
         good = ok_k & ok_j
         if np.count_nonzero(good) < 200:
-            return False  # too little in common to tell: measure properly
+            return False, refused  # too little in common to tell: measure properly
         sd = np.stack([gx * half, gy * half, -v * gx * half + u * gy * half,
                        np.ones(n)], axis=1)[good]
         error = (values - template)[good]
@@ -115,9 +155,9 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
         try:
             delta = np.linalg.solve(weighted.T @ sd, weighted.T @ error)
         except np.linalg.LinAlgError:
-            return False
+            return False, refused
         # Corner motion of a shift (delta[0:2], normalised units) and rotation delta[2].
         motion = half * (np.hypot(delta[0], delta[1]) + abs(delta[2]) * np.sqrt(2.0))
         if motion >= STILL:
-            return False
-    return True
+            return False, refused
+    return True, refused

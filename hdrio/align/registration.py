@@ -22,7 +22,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.ndimage
 
-from hdrio.align.lucaskanade import corner_motion, refine_LucasKanade, rescale, residual
+from hdrio.align.lucaskanade import (
+    corner_motion,
+    refine_LucasKanade,
+    rescale,
+    residual,
+    strongest,
+)
 from hdrio.align.pyramid import (
     BaseImage,
     base_factor,
@@ -55,6 +61,16 @@ misfit of no motion (:func:`hdrio.align.lucaskanade.residual`)."""
 MTB_LEVELS = 6
 """Median-threshold-bitmap levels: shifts up to 63 base pixels (252 pixels at 24 MP)."""
 
+MIN_USABLE = 0.02
+"""A bracket is registered only when at least this fraction of the image is usable
+(every channel well exposed: unclipped and above the noise, :data:`hdrio.skips.WELL_EXPOSED`)
+in it and in the bracket it is registered to; otherwise it is left unwarped and the run
+says so. (The truth harness's still GoldenGate/dorf0 stack at 250 px: its longest bracket
+is 0.9 % usable, and a shift found there was 31 px of nothing.)"""
+
+MIN_USABLE_PIXELS = 400
+"""... and at least this many base pixels (a small image's 2 % is too few to register)."""
+
 
 @dataclass(frozen=True)
 class Alignment:
@@ -77,6 +93,9 @@ class Alignment:
     transforms: np.ndarray
     model: str
     motion: tuple[float, ...]
+    refused: tuple[tuple[int, str], ...] = ()
+    """``(bracket, why)`` for each bracket not registered (left unwarped): too little of
+    it usable, or a shift the evidence does not support."""
 
     @property
     def moved(self) -> bool:
@@ -86,28 +105,37 @@ class Alignment:
     def describe(self, files: tuple[str, ...] | None = None) -> list[str]:
         """One line per bracket: shift (pixels), rotation (degrees), for the summary."""
         lines = []
+        refused = dict(self.refused)
         for j, warp in enumerate(self.transforms):
             if j == self.reference:
                 continue
             name = files[j] if files else f"bracket {j}"
+            if j in refused:
+                lines.append(f"{name}: not registered ({refused[j]}): left unwarped")
+                continue
             angle = math.degrees(math.atan2(warp[1, 0], warp[0, 0]))
             lines.append(f"{name}: shift {warp[0, 2]:+.2f}, {warp[1, 2]:+.2f} px, "
                          f"rotation {angle:+.3f} deg (corners move {self.motion[j]:.2f} px)")
         return lines
 
 
-def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536) -> int:
+def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
+                      masks: list[np.ndarray] | None = None) -> int:
     """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
     channel well exposed (:data:`hdrio.skips.WELL_EXPOSED`, on a grid of about
-    ``samples`` pixels); the one nearest the middle on a tie."""
+    ``samples`` pixels, or ``masks`` of them already made); the one nearest the middle on
+    a tie."""
     count, height, width, _ = codes.shape
     step = max(1, int(math.sqrt(height * width / samples)))
     low, high = well_exposed_codes(code_max)
     middle = (count - 1) / 2.0
     scores = []
     for j in range(count):
-        grid = codes[j, step // 2::step, step // 2::step]
-        good = np.all((grid >= low) & (grid <= high), axis=-1)
+        if masks is not None:
+            good = masks[j]
+        else:
+            grid = codes[j, step // 2::step, step // 2::step]
+            good = np.all((grid >= low) & (grid <= high), axis=-1)
         scores.append((int(np.count_nonzero(good)), -abs(j - middle)))
     return max(range(count), key=lambda j: scores[j])
 
@@ -149,35 +177,112 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape)) if start is None else 0
     pyramids = {reference: _pyramid(bases[reference], levels)}
     transforms = np.repeat(np.eye(3)[None], count, axis=0)  # base pixels, then full
-    # Each bracket is aligned to its neighbour towards the reference (the pair shares
-    # the most well-exposed pixels), and the warps composed.
-    order = [*range(reference - 1, -1, -1), *range(reference + 1, count)]
-    for j in order:
-        k = j + 1 if j < reference else j - 1
-        if start is None:
-            dx, dy = align_Ward2003(bases[k].grey, bases[j].grey, MTB_LEVELS,
-                                    stack.code_max)
-            guess = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
-        else:
-            guess = rescale(start.transforms[j] @ np.linalg.inv(start.transforms[k]),
-                            1.0 / factor)
-        pyramids[j] = _pyramid(bases[j], levels)
-        step = refine_LucasKanade(pyramids[k], pyramids[j], guess, model)
-        # Keep the estimate only if it fits clearly better than no motion at all: where
-        # the scene gives no purchase (a smooth gradient, clipping that moves the
-        # bitmaps' medians) any shift fits as well, and the camera most likely held still.
-        fine_k, fine_j = pyramids[k][0], pyramids[j][0]
-        if (residual(*fine_k, *fine_j, step)
-                > IMPROVEMENT * residual(*fine_k, *fine_j, np.eye(3))):
-            step = np.eye(3)
-        transforms[j] = step @ transforms[k]
-        if j != k and abs(j - reference) > 1:
-            pyramids.pop(k)  # no longer needed: keep two or three pyramids at most
+    refused = dict(start.refused) if start is not None else {}
+    # Each bracket is aligned to its nearest registered neighbour towards the reference
+    # (the pair shares the most well-exposed pixels), and the warps composed.
+    for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
+        k = reference
+        for j in side:
+            if j in refused:
+                continue
+            why = unusable(bases[k].valid, bases[j].valid)
+            if why is None:
+                pyramids[j] = _pyramid(bases[j], levels)
+                step, why = _register_pair(pyramids[k], pyramids[j], bases[k], bases[j],
+                                           None if start is None else rescale(
+                                               start.transforms[j]
+                                               @ np.linalg.inv(start.transforms[k]),
+                                               1.0 / factor),
+                                           model, stack.code_max)
+            if why is not None:  # left unwarped; the next bracket out pairs with k
+                refused[j] = why
+                pyramids.pop(j, None)
+                continue
+            transforms[j] = step @ transforms[k]
+            if k != reference:
+                pyramids.pop(k)  # no longer needed: keep two or three pyramids at most
+            k = j
     motion = [0.0] * count
-    for j in order:
+    for j in range(count):
         transforms[j] = rescale(transforms[j], factor) if factor > 1 else transforms[j]
         motion[j] = corner_motion(transforms[j], height, width)
-    return Alignment(reference, transforms, model, tuple(motion))
+    return Alignment(reference, transforms, model, tuple(motion),
+                     tuple(sorted(refused.items())))
+
+
+def unusable(valid_k: np.ndarray, valid_j: np.ndarray, scale: float = 1.0) -> str | None:
+    """Why two brackets (their base images' ``valid`` masks, or a sample of them each
+    pixel of which stands for ``scale`` base pixels) cannot be registered to each other,
+    or ``None``: less than :data:`MIN_USABLE` of the image (or :data:`MIN_USABLE_PIXELS`
+    base pixels) is usable in both."""
+    common = int(np.count_nonzero(valid_k & valid_j))
+    if common < max(MIN_USABLE * valid_k.size, MIN_USABLE_PIXELS / scale):
+        return (f"only {100.0 * common / valid_k.size:.1f} % of it is unclipped and above "
+                f"the noise where its neighbour is, {100 * MIN_USABLE:g} % needed")
+    return None
+
+
+TEXTURE = 0.02
+"""A shift is measurable only when, at the points it is measured on, the gradients along
+x and along y and a constant (the exposure offset) are not nearly collinear: the smallest
+eigenvalue of their normalised Gram matrix is above this. (An exponential ramp, log-linear
+along x, has the same x gradient everywhere: any x shift fits as well as an offset, and
+on 48x64 pixels one 2.8 px off fitted the noise 20 % better than none.)"""
+
+
+def _textured(image: np.ndarray, index: np.ndarray) -> bool:
+    """Whether ``image``'s gradients at the flat ``index`` pin a translation down
+    (:data:`TEXTURE`)."""
+    if index.size < 3:
+        return False
+    gy, gx = np.gradient(image)
+    columns = np.stack([gx.reshape(-1)[index], gy.reshape(-1)[index],
+                        np.ones(index.size)], axis=1).astype(np.float64)
+    norms = np.linalg.norm(columns, axis=0)
+    if np.any(norms == 0):
+        return False
+    gram = (columns / norms).T @ (columns / norms)
+    return float(np.linalg.eigvalsh(gram)[0]) > TEXTURE
+
+
+def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
+                   guess: np.ndarray | None, model: str, code_max: int
+                   ) -> tuple[np.ndarray, str | None]:
+    """Bracket ``j``'s warp to ``k`` on the base grid (bitmaps, then Lucas-Kanade from
+    ``guess`` when given), judged by its evidence: ``(warp, None)``, the identity when
+    the warp fits no better than no motion, or ``(identity, why)`` when it cannot be
+    trusted."""
+    if guess is None:
+        dx, dy = align_Ward2003(base_k.grey, base_j.grey, MTB_LEVELS, code_max)
+        guess = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+    step = refine_LucasKanade(pyramid_k, pyramid_j, guess, model)
+    still = np.eye(3)
+    fine_k, fine_j = pyramid_k[0], pyramid_j[0]
+    points = strongest(*fine_k)
+    if corner_motion(step, *fine_k[0].shape) > 0 and not _textured(fine_k[0], points):
+        return still, ("a smooth gradient: a shift along it is a change of brightness, "
+                       "nothing to register")
+    moved, unmoved = (residual(*fine_k, *fine_j, step, index=points),
+                      residual(*fine_k, *fine_j, still, index=points))
+    if not (np.isfinite(moved) and np.isfinite(unmoved)):
+        return still, "too few well-exposed edges in common to judge a shift"
+    # Keep the estimate only if it fits clearly better than no motion at all: where
+    # the scene gives no purchase (a smooth gradient, clipping that moves the bitmaps'
+    # medians) any shift fits as well, and the camera most likely held still.
+    if moved > IMPROVEMENT * unmoved:
+        return still, None
+    # A real shift fits better at every level; one that fits the fine level only (an
+    # alias, a repeated texture a period off) does not at the coarsest.
+    top = len(pyramid_k) - 1
+    coarse = rescale(step, 0.5**top)
+    if top > 0 and corner_motion(coarse, *pyramid_k[top][0].shape) > 1.0:
+        points = strongest(*pyramid_k[top])
+        moved_c = residual(*pyramid_k[top], *pyramid_j[top], coarse, index=points)
+        unmoved_c = residual(*pyramid_k[top], *pyramid_j[top], still, index=points)
+        if not moved_c <= unmoved_c:
+            return still, (f"the shift fits the fine level only (misfit {moved_c:.3f} "
+                           f"against {unmoved_c:.3f} unmoved at the coarsest)")
+    return step, None
 
 
 def align_stack(stack: ExposureStack, alignment: Alignment,

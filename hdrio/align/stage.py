@@ -11,7 +11,7 @@ import numpy as np
 from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.align.deghost import CELL, Deghosting, consistency_variance, deghost
 from hdrio.align.pyramid import base_factor
-from hdrio.align.quick import looks_still
+from hdrio.align.quick import looks_still, usable_masks
 from hdrio.align.registration import (
     Alignment,
     align_stack,
@@ -76,11 +76,14 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:
-        reference = reference_bracket(stack.codes, stack.code_max)
-        if looks_still(stack.codes, linear_tables(response, stack.exposures),
-                       stack.code_max, reference):
+        masks = usable_masks(stack.codes, stack.code_max)  # read once for both
+        reference = reference_bracket(stack.codes, stack.code_max, masks=masks)
+        still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
+                                     stack.code_max, reference, masks)
+        if still:
             motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
-                                         model, (0.0,) * stack.count)
+                                         model, (0.0,) * stack.count,
+                                         tuple(sorted(refused.items())))
             return stack, response, motion
     motion.alignment, response = register(stack, response, model, solve)
     if mode != "auto" or motion.alignment.moved or not skip_warp:

@@ -164,11 +164,11 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "--merge's own optional argument"),
     Option("--align", ("MODE",), "align", choice(*ALIGN_MODES), example=("off",),
            help="register the brackets to the best-exposed one: auto (measure; warp only if "
-                "some bracket moved more than 0.1 px), off, or a model to warp with "
-                "(default off for now: see docs/motion.md)"),
+                "some bracket moved more than 0.1 px; a bracket too clipped to register "
+                "is left unwarped and named), off, or a model to warp with (default auto)"),
     Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
-                "people, leaves): auto or off (default off for now: see docs/motion.md)"),
+                "people, leaves): auto or off (default auto)"),
     Option("--motion-layer", (), "motion_layer", flag, example=(),
            help="also write the deghosting mask as the EXR channel motion.Y (1: some "
                 "bracket dropped for motion)"),
