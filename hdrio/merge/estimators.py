@@ -44,6 +44,7 @@ from hdrio.merge.noise import (
     observation_variance,
     usable_codes,
 )
+from hdrio.merge.saturation import policy_limits
 from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
@@ -118,8 +119,9 @@ def _merge(method: str):
             noise = fit_noise(stack.codes, stack.exposures, response,
                               code_floor=code_variance_floor(stack.files))
         weights = merge_weights(method, response, stack.exposures, noise)
+        limits, _ = policy_limits(saturation, stack.codes, response, noise)
         return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
-                              early_stop, weights)
+                              early_stop, weights, limits)
 
     merge.__name__ = f"merge_{method.replace('-', '_')}"
     merge.__doc__ = (f"Merge ``stack`` with the ``{method}`` estimator (see "

@@ -338,42 +338,92 @@ def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _fallback(codes, y, x, c, channels, code_max, per_channel,
-              estimates):  # pragma: no cover - compiled
-    """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
-    from (the shortest bracket's if it is saturated even there)."""
-    kept = 0
-    while kept < codes.shape[0]:
-        row = codes[kept, y]
-        saturated = row[x * channels + c] == code_max
-        if not per_channel:
-            for k in range(channels):
-                saturated |= row[x * channels + k] == code_max
-        if saturated:
-            break
-        kept += 1
-    j = kept - 1 if kept > 0 else 0
-    return estimates[j, c, codes[j, y][x * channels + c]]
+def _unsafe(row, x, c, channels, limits, pixel_rule):  # pragma: no cover - compiled
+    """Whether channel ``c`` of pixel ``x`` in ``row`` is dropped: its code at or above
+    its limit, or (``pixel_rule``) any channel's."""
+    if not pixel_rule:
+        return row[x * channels + c] >= limits[c]
+    for k in range(channels):
+        if row[x * channels + k] >= limits[k]:
+            return True
+    return False
 
 
 @njit(**_KERNEL)
-def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cover - compiled
-    """Pixels with a channel saturated in ``shortest``; pixels at 0 in all of ``longest``."""
+def _fallback(codes, y, x, c, channels, limits, pixel_rule,
+              estimates):  # pragma: no cover - compiled
+    """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
+    from. Dropped even from the shortest bracket (clipped everywhere): a neutral lower
+    bound, the largest of the shortest bracket's estimates over the pixel's channels
+    (every channel the same, so no colour cast), when the pixel rule dropped it or
+    every channel is clipped; else the channel's own estimate there."""
+    kept = 0
+    while kept < codes.shape[0] and not _unsafe(codes[kept, y], x, c, channels, limits,
+                                                pixel_rule):
+        kept += 1
+    if kept > 0:
+        return estimates[kept - 1, c, codes[kept - 1, y][x * channels + c]]
+    row = codes[0, y]
+    every = True
+    for k in range(channels):
+        every &= row[x * channels + k] >= limits[k]
+    if not (pixel_rule or every):
+        return estimates[0, c, row[x * channels + c]]
+    value = estimates[0, 0, row[x * channels]]
+    for k in range(1, channels):
+        value = max(value, estimates[0, k, row[x * channels + k]])
+    return value
+
+
+@njit(**_KERNEL)
+def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - compiled
+    """``out``: ``row``'s codes with every dropped observation set to ``Z_max`` (a code
+    at or above its channel's limit; with ``pixel_rule`` all of the pixel's channels
+    when any one is), so that the per-channel resets apply the policy."""
+    channels = limits.size
+    top = row.dtype.type(code_max)
+    if channels == 3:
+        l0, l1, l2 = limits[0], limits[1], limits[2]
+        for x in range(row.size // 3):  # written so that it vectorises
+            i = 3 * x
+            z0, z1, z2 = row[i], row[i + 1], row[i + 2]
+            u0, u1, u2 = z0 >= l0, z1 >= l1, z2 >= l2
+            if pixel_rule:
+                u0 = u1 = u2 = u0 | u1 | u2
+            out[i] = top if u0 else z0
+            out[i + 1] = top if u1 else z1
+            out[i + 2] = top if u2 else z2
+        return
+    for x in range(row.size // channels):
+        any_unsafe = False
+        for c in range(channels):
+            any_unsafe |= row[x * channels + c] >= limits[c]
+        for c in range(channels):
+            z = row[x * channels + c]
+            out[x * channels + c] = top if (z >= limits[c] or (pixel_rule and any_unsafe)) \
+                else z
+
+
+@njit(**_KERNEL)
+def _clipped_and_black(shortest, longest, limits, channels):  # pragma: no cover - compiled
+    """Pixels with a channel at or above its limit in ``shortest``; pixels at 0 in all of
+    ``longest``."""
     clipped = 0
     black = 0
     if channels == 3:
+        l0, l1, l2 = limits[0], limits[1], limits[2]
         # Written so that it vectorises (8x faster than a stepped range of booleans).
         for x in range(shortest.size // 3):
             i = 3 * x
-            clipped += np.int32((shortest[i] == code_max) | (shortest[i + 1] == code_max)
-                                | (shortest[i + 2] == code_max))
+            clipped += np.int32((shortest[i] >= l0) | (shortest[i + 1] >= l1)
+                                | (shortest[i + 2] >= l2))
             black += np.int32((longest[i] | longest[i + 1] | longest[i + 2]) == 0)
         return clipped, black
     for x in range(shortest.size // channels):
         any_saturated = False
         all_black = True
         for c in range(channels):
-            any_saturated |= shortest[x * channels + c] == code_max
+            any_saturated |= shortest[x * channels + c] >= limits[c]
             all_black &= longest[x * channels + c] == 0
         clipped += any_saturated
         black += all_black
@@ -381,7 +431,7 @@ def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cov
 
 
 @njit(parallel=True, **_KERNEL)
-def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_channel,
+def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, pixel_rule,
                  log_domain, early_stop, out, clipped_rows, black_rows,
                  skipped_rows):  # pragma: no cover - compiled
     """Merge rows ``top .. bottom`` of the brackets into ``out`` ``(H, W * C)`` float32.
@@ -390,22 +440,32 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_chan
     is ``w(z) x_j(z) + i w(z)``, the numerator's and the denominator's term, both 0 at
     ``z = code_max`` (a saturated observation never counts); ``estimates[j, c, z]``
     (float64) is ``x_j(z)`` for the fallback. ``pairs`` is :func:`pair_tables` of the
-    terms (the per-channel policy with three channels of 8-bit codes), or empty for the
-    general path. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
+    terms (three channels of 8-bit codes), or empty for the general path.
+
+    The saturation policy: ``limits`` ``(C,)`` int64, the first code of each channel that
+    is dropped (``code_max`` drops the top code only); ``pixel_rule``: a dropped channel
+    drops the whole observation (every channel of that pixel in that bracket). Unless
+    both are at their plainest (per channel, at ``code_max``), each bracket's row is first
+    remapped (:func:`_remap_row`, into a per-task buffer) so that the per-channel resets
+    apply the policy. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
     reads every bracket of every row (the same result, to float32 rounding). Per row,
-    for the statistics: ``clipped_rows`` (pixels with a channel saturated in the
-    shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
+    for the statistics: ``clipped_rows`` (pixels with a channel at or above its limit in
+    the shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
     and ``skipped_rows`` (pixel-brackets the early stop never read).
     """
     count = codes.shape[0]
     channels = terms.shape[1]
     n = out.shape[1]
     by_pairs = pairs.shape[0] == count
+    remap = pixel_rule
+    for c in range(channels):
+        remap |= limits[c] < code_max
     tasks = (bottom - top + ROWS_PER_TASK - 1) // ROWS_PER_TASK
     for task in prange(tasks):
         sums = np.empty(n, np.complex64)  # numerator + i denominator
         scale = np.empty(n, np.int32)
         zeros = np.zeros(n, codes.dtype)
+        remapped = np.empty((count if remap else 0, 1, n), codes.dtype)
         for y in range(top + task * ROWS_PER_TASK,
                        min(bottom, top + (task + 1) * ROWS_PER_TASK)):
             # Early stop: the first bracket saturated across the whole row, and every
@@ -415,20 +475,25 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_chan
                 if _saturated_everywhere(codes[j, y], code_max):
                     stop = j
                     break
+            source, row_of = codes, y
+            if remap:
+                for j in range(stop):
+                    _remap_row(codes[j, y], remapped[j, 0], limits, code_max, pixel_rule)
+                source, row_of = remapped, 0
             if by_pairs:
-                _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max, sums)
+                _accumulate_by_pairs(source, row_of, stop, pairs, zeros, code_max, sums)
             else:
-                _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel, sums)
+                _accumulate_by_brackets(source, row_of, stop, terms, code_max, True, sums)
             row = out[y]
             if _finish(sums, row, log_domain, scale):
                 for i in range(n):
                     if sums[i].imag <= 0.0:
                         value = _fallback(codes, y, i // channels, i % channels,
-                                          channels, code_max, per_channel, estimates)
+                                          channels, limits, pixel_rule, estimates)
                         if log_domain:
                             value = math.exp(min(max(value, LOG_FLOAT32_TINY),
                                                  LOG_FLOAT32_MAX))
                         row[i] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
             skipped_rows[y] = (count - stop) * (n // channels)
             clipped_rows[y], black_rows[y] = _clipped_and_black(
-                codes[0, y], codes[count - 1, y], code_max, channels)
+                codes[0, y], codes[count - 1, y], limits, channels)
