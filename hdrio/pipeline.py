@@ -26,7 +26,7 @@ from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
 from hdrio.jit import announce
-from hdrio.merge.debevec1997 import MergeStatistics
+from hdrio.merge.debevec1997 import MergeStatistics, clipped_everywhere_mask
 from hdrio.merge.estimators import (
     MERGE_METHODS,
     NOISE_AWARE,
@@ -62,9 +62,10 @@ class MergeOptions:
     # on the truth harness's core stacks median error 1.03 % against 1.25 % for the
     # tutorial's log-domain triangle-weighted mean ("log"), p99 3.4 % against 4.8 %.
     merge: str = "inverse-variance"
-    # Drop a saturated channel on its own, not the whole pixel (the tutorial's "pixel"):
-    # see hdrio/merge/debevec1997.py.
-    saturation: str = "channel"
+    # "auto": an observation counts only where every channel is safely below its own white
+    # level when the stack shows its channels mixed after the clip (hue-true on camera
+    # JPEGs), else channel by channel (hdrio/merge/saturation.py).
+    saturation: str = "auto"
     exclude_colour: tuple[int, ...] | None = None
     seed: int = 0
     # colour-science name of the radiance's primaries: set from the input encoding.
@@ -94,6 +95,7 @@ class MergeOptions:
     # and leaves magenta fringes and a grey cell at the clipped cloud edge (docs/motion.md).
     deghost: str = "off"
     motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
+    clip_mask: bool = False  # pixels clipped in every bracket as an EXR channel "clipped.Y"
 
     def __post_init__(self) -> None:
         check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
@@ -251,7 +253,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     weights = effective_weights(method, response, merged.exposures, options.weighting, noise)
     if merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
-                     options.saturation == "channel")
+                     options.saturation == "channel")  # safe: the pixel rule at Z_max
     timings["deghost"] += time.perf_counter() - start
     start = time.perf_counter()
     uncertainty = None
@@ -309,6 +311,13 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:clippedFraction": result.statistics.clipped_everywhere
         / result.statistics.pixels,
     }
+    if result.statistics.limits:
+        attributes["hdrio:saturationLimits"] = ", ".join(
+            f"{name} {limit}" for name, limit in zip("RGB" if response.channels == 3 else "Y",
+                                                      result.statistics.limits))
+    if options.clip_mask:
+        attributes["hdrio:clipMask"] = ("layer clipped: 1 where the pixel is clipped in "
+                                        "every bracket (merged to a neutral lower bound)")
     attributes.update(capture_attributes(stack))
     if result.noise is not None:
         attributes.update(result.noise.attributes())
@@ -444,6 +453,19 @@ def output_pixels(result: MergeResult) -> np.ndarray:
                            result.options.ocio_config)
 
 
+def merge_layers(result: MergeResult) -> dict[str, np.ndarray]:
+    """The EXR layers the options ask for beside the pixels: ``uncertainty``, ``motion``
+    (``--motion-layer``), ``clipped`` (``--clip-mask``)."""
+    options = result.options
+    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
+    if options.motion_layer and result.motion.deghosting is not None:
+        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
+    if options.clip_mask:
+        limits = result.statistics.limits or (result.stack.code_max,) * result.stack.shape[2]
+        layers["clipped"] = clipped_everywhere_mask(result.stack.codes[0], limits)
+    return layers
+
+
 def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, object], *,
                    pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
                    alpha: np.ndarray | None = None,
@@ -493,12 +515,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                          options=options, progress=progress, read_progress=read_progress)
     start = time.perf_counter()
     say(f"writing {output}")
-    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
-    if options.motion_layer and result.motion.deghosting is not None:
-        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
-                                           observe=observe, layers=layers)
+                                           observe=observe, layers=merge_layers(result))
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()

@@ -67,6 +67,10 @@ class MergeStatistics:
     observations_skipped: int = 0
     """Pixel-brackets never read: the early stop found their whole row saturated in that
     bracket or a shorter one (out of ``pixels`` x brackets)."""
+    limits: tuple[int, ...] = ()
+    """The first code of each channel the saturation policy dropped."""
+    pixel_rule: bool = False
+    """A dropped channel dropped the whole observation."""
 
 
 MERGE_BAND_ROWS = 128
@@ -86,15 +90,16 @@ def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
                    saturation: str = "channel", early_stop: bool = True,
-                   weights: np.ndarray | None = None, limits: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, MergeStatistics]:
+                   weights: np.ndarray | None = None, limits: np.ndarray | None = None,
+                   pixel_rule: bool = False) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
 
     ``saturation`` is ``"channel"`` (a saturated channel is dropped on its own),
-    ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel) or ``"safe"``
+    ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel), ``"safe"``
     (a channel at or above its entry of ``limits``, ``(C,)`` codes from
     :func:`hdrio.merge.saturation.policy_limits`, drops the whole pixel; ``Z_max`` when
-    not given).
+    not given) or ``"auto"`` (``limits`` with the pixel rule when ``pixel_rule``, else
+    per channel).
     ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
     result to float32 rounding). ``weights``, when given, are per-bracket weights
     ``w_j(z)`` ``(P, C, code_max + 1)`` in place of ``weighting``'s ``w(z)`` (the
@@ -123,9 +128,10 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     if count > MAX_BRACKETS:
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
     terms, estimates = merge_tables(response, stack.exposures, weighting, domain, weights)
-    if saturation != "safe" or limits is None:
+    if saturation in ("channel", "pixel") or limits is None:
         limits = np.full(channels, stack.code_max)
     limits = np.ascontiguousarray(np.clip(limits, 1, stack.code_max), dtype=np.int64)
+    pixel_rule = saturation in ("pixel", "safe") or (saturation == "auto" and pixel_rule)
     if channels == 3 and stack.code_max < PAIR_LEVELS:
         pairs = pair_tables(terms, stack.code_max)
     else:
@@ -140,14 +146,23 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     for top in range(0, height, band):
         bottom = min(height, top + band)
         merge_kernel(codes, top, bottom, terms, estimates, pairs, stack.code_max,
-                     limits, saturation != "channel", domain == "log", early_stop,
+                     limits, pixel_rule, domain == "log", early_stop,
                      radiance.reshape(height, width * channels), *counts)
         release(stack.codes, None, top, bottom)
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=int(counts[0].sum()),
         black_everywhere=int(counts[1].sum()), observations_skipped=int(counts[2].sum()),
+        limits=tuple(int(v) for v in limits), pixel_rule=bool(pixel_rule),
     )
     return radiance, statistics
+
+
+def clipped_everywhere_mask(shortest: np.ndarray, limits) -> np.ndarray:
+    """``(H, W)`` float32: 1 where a channel of the shortest bracket's codes ``(H, W, C)``
+    is at or above its limit (:attr:`MergeStatistics.limits`): the pixels the merge
+    gave a neutral lower bound (or, with the ``channel`` policy, a channel's own)."""
+    limits = np.asarray(limits, dtype=np.int64)
+    return np.any(shortest >= limits, axis=-1).astype(np.float32)
 
 
 def code_weights(response: CameraResponse, weighting: str) -> np.ndarray:

@@ -119,9 +119,10 @@ def _merge(method: str):
             noise = fit_noise(stack.codes, stack.exposures, response,
                               code_floor=code_variance_floor(stack.files))
         weights = merge_weights(method, response, stack.exposures, noise)
-        limits, _ = policy_limits(saturation, stack.codes, response, noise)
+        limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,
+                                           stack.exposures)
         return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
-                              early_stop, weights, limits)
+                              early_stop, weights, limits, pixel_rule)
 
     merge.__name__ = f"merge_{method.replace('-', '_')}"
     merge.__doc__ = (f"Merge ``stack`` with the ``{method}`` estimator (see "
