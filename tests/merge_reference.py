@@ -43,7 +43,7 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         numerator += weight * estimate
         denominator += weight
         if j == 0:
-            clipped = int(np.count_nonzero(np.any(saturated, axis=-1)))
+            clipped = int(np.count_nonzero(np.any(codes >= limits, axis=-1)))
             # Clipped everywhere: a neutral lower bound (the largest channel's estimate),
             # where the pixel is dropped whole; a channel dropped alone keeps its own.
             whole = np.all(saturated, axis=-1, keepdims=True)
@@ -55,5 +55,12 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         merged = np.where(denominator > 0, numerator / denominator, fallback)
         if domain == "log":
             merged = np.exp(np.minimum(merged, np.log(FLOAT32_MAX)))
+        shortest = tables[0][stack.codes[0].astype(np.int64), channel_index]
+        neutral = shortest.max(axis=-1, keepdims=True)
+        if domain == "log":
+            neutral = np.exp(np.minimum(neutral, np.log(FLOAT32_MAX)))
+    # Clipped in every bracket (any channel dropped even in the shortest): neutral.
+    clipped_pixels = np.any(stack.codes[0] >= limits, axis=-1, keepdims=True)
+    merged = np.where(clipped_pixels, neutral, merged)
     radiance = np.clip(merged, FLOAT32_TINY, FLOAT32_MAX).astype(np.float32)
     return radiance, (clipped, black)
