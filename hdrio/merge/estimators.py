@@ -113,7 +113,7 @@ def merge_domain(method: str) -> str:
 
 def _merge(method: str):
     def merge(stack: ExposureStack, response: CameraResponse, weighting: str = "Debevec1997",
-              saturation: str = "channel", early_stop: bool = True,
+              saturation: str = "auto", early_stop: bool = True,
               noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
         if method in NOISE_AWARE and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,

@@ -49,7 +49,7 @@ _MARGIN_SIGMAS = 2.0  # the shoulder: codes within this many sigmas of the white
 _MIXING_BIAS = 0.03  # partly clipped observations this far off (ln E) show mixing
 _MIXING_COUNT = 50  # observations needed to say so
 MIXING_GRID_LIMIT = 2**18  # pixels sampled for the white levels and the mixing test
-_MID = (0.1, 0.85)  # the code range (fractions of Z_max) of the channels compared
+_MID = (0.1,)  # the least code (fraction of Z_max) of the channels compared
 
 
 def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:
@@ -103,42 +103,51 @@ def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseM
 
 def channel_mixing(grid: np.ndarray, response: CameraResponse, exposures,
                    limits: np.ndarray) -> float:
-    """How far (in ``ln E``) a partly clipped observation's unclipped channels are from
-    the next shorter bracket's, beyond what unclipped observations show: 0 when the
-    camera keeps its channels apart, several percent when it mixes them after the clip.
+    """How far (in ``ln E``) a partly clipped observation's other channels are from the
+    next shorter bracket's, beyond what unclipped observations of the same codes show:
+    about 0 when the camera keeps its channels apart, several percent when it mixes them
+    after the clip.
 
     ``grid`` ``(P, n, C)`` sampled codes, shortest first. For each pair of neighbouring
     brackets, pixels whose shorter bracket is safe in every channel are compared channel
-    by channel where both codes lie in 10-85 % of the range; the statistic is the
-    largest, over channels, of the difference between the median ``ln`` ratio of the
-    partly clipped observations (some channel at or above its limit in the longer
-    bracket) and that of the unclipped ones. ``nan`` with fewer than 50 partly clipped
-    observations of any channel (nothing clips part-way: no evidence either way).
+    by channel where the longer bracket's code of that channel lies from 10 % of the
+    range up to its limit, in bins of 1/16 of the range: in each bin, the median ``ln``
+    ratio of the partly clipped observations (another channel at or above its limit in
+    the longer bracket) less that of the unclipped ones. The statistic is the largest,
+    over channels, of the count-weighted mean of those differences' magnitudes (bins
+    with 10 of each); 0 when no channel has 50 partly clipped observations to compare
+    (nothing clips part-way: no evidence of mixing).
     """
     exposures = np.asarray(exposures, dtype=np.float64)
     code_max = response.code_max
-    low, high = (int(f * code_max) for f in _MID)
+    low = int(_MID[0] * code_max)
+    width = max(1, (code_max + 1) // 16)
     g = response.log_inverse
     channels = grid.shape[-1]
-    partly: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    clean: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    for j in range(1, grid.shape[0]):
-        short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-        safe_short = np.all(short < limits, axis=-1)
-        clipped_long = np.any(long >= limits, axis=-1)
-        for c in range(channels):
-            ok = safe_short & (short[:, c] >= low) & (long[:, c] >= low) \
-                & (long[:, c] <= high)
-            d = (g[long[ok, c], c] - np.log(exposures[j])) \
-                - (g[short[ok, c], c] - np.log(exposures[j - 1]))
-            partly[c].append(d[clipped_long[ok]])
-            clean[c].append(d[~clipped_long[ok]])
     bias = 0.0
     for c in range(channels):
-        p, q = np.concatenate(partly[c]), np.concatenate(clean[c])
-        if p.size < _MIXING_COUNT or q.size < _MIXING_COUNT:
+        values, bins, partly = [], [], []
+        for j in range(1, grid.shape[0]):
+            short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
+            ok = np.all(short < limits, axis=-1) & (short[:, c] >= low) \
+                & (long[:, c] >= low) & (long[:, c] < limits[c])
+            values.append((g[long[ok, c], c] - np.log(exposures[j]))
+                          - (g[short[ok, c], c] - np.log(exposures[j - 1])))
+            bins.append(long[ok, c] // width)
+            partly.append(np.any(long[ok] >= limits, axis=-1))
+        d, b, p = np.concatenate(values), np.concatenate(bins), np.concatenate(partly)
+        if np.count_nonzero(p) < _MIXING_COUNT:
             continue
-        bias = max(bias, abs(float(np.median(p) - np.median(q))))
+        total = weight = 0.0
+        for k in np.unique(b[p]):
+            here = b == k
+            dp, dq = d[here & p], d[here & ~p]
+            if dp.size < 10 or dq.size < 10:
+                continue
+            total += dp.size * abs(float(np.median(dp) - np.median(dq)))
+            weight += dp.size
+        if weight:
+            bias = max(bias, total / weight)
     return bias
 
 
