@@ -253,14 +253,15 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     weights = effective_weights(method, response, merged.exposures, options.weighting, noise)
     if merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
-                     options.saturation == "channel")  # safe: the pixel rule at Z_max
+                     not statistics.pixel_rule)  # the policy's rule, at Z_max
     timings["deghost"] += time.perf_counter() - start
     start = time.perf_counter()
     uncertainty = None
     if options.uncertainty:
         say("predicting each pixel's uncertainty")
         uncertainty = relative_uncertainty(merged, response, weights, noise,
-                                           merge_domain(method), options.saturation)
+                                           merge_domain(method),
+                                           "pixel" if statistics.pixel_rule else "channel")
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
     timings["merge"] += time.perf_counter() - start
@@ -312,6 +313,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         / result.statistics.pixels,
     }
     if result.statistics.limits:
+        attributes["hdrio:saturationRule"] = saturation_rule(result.statistics)
         attributes["hdrio:saturationLimits"] = ", ".join(
             f"{name} {limit}" for name, limit in zip("RGB" if response.channels == 3 else "Y",
                                                       result.statistics.limits))
@@ -346,6 +348,13 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         supported.append(f"{name} {codes[0]}-{codes[-1]}" if codes.size else f"{name} none")
     attributes["hdrio:responseSupport"] = ", ".join(supported)
     return attributes
+
+
+def saturation_rule(statistics: MergeStatistics) -> str:
+    """What the saturation policy dropped, in words (the summary, ``hdrio:saturationRule``)."""
+    if statistics.pixel_rule:
+        return "pixel: an observation with any channel at its limit is dropped whole"
+    return "channel: a channel at its limit is dropped alone"
 
 
 def exposure_text(seconds: float) -> str:

@@ -17,7 +17,7 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
-from hdrio.pipeline import MergeOptions, MergeResult, merge_files
+from hdrio.pipeline import MergeOptions, MergeResult, merge_files, saturation_rule
 from hdrio.tonemap import TONEMAP_METHODS
 
 
@@ -144,8 +144,11 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
-        f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} %, black in every "
+        f"bracket {100 * stats.clipped_everywhere / stats.pixels:.2f} % (a neutral lower "
+        f"bound{', layer clipped.Y' if result.options.clip_mask else ''}), black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %",
+        f"clipping:  --saturation {result.options.saturation}, {saturation_rule(stats)}"
+        + (f" (limits {', '.join(str(v) for v in stats.limits)})" if stats.limits else ""),
         *motion_lines(result),
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",

@@ -50,6 +50,10 @@ _MIXING_BIAS = 0.03  # partly clipped observations this far off (ln E) show mixi
 _MIXING_COUNT = 50  # observations needed to say so
 MIXING_GRID_LIMIT = 2**18  # pixels sampled for the white levels and the mixing test
 _MID = (0.1,)  # the least code (fraction of Z_max) of the channels compared
+_BASELINE = (0.25, 0.65)  # codes (fractions of Z_max) whose ln ratio is the reference
+_SHOULDER_FROM = 0.7  # shoulders are looked for above this fraction of the range
+_SHOULDER_BIAS = 0.10  # a bin of codes off by more than this (ln E) is in the shoulder
+_SHOULDER_COUNT = 20  # observations a bin needs
 
 
 def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:
@@ -79,11 +83,60 @@ def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:
     return levels
 
 
+def shoulders(grid: np.ndarray, response: CameraResponse, exposures,
+              limits: np.ndarray) -> np.ndarray:
+    """Where each channel's observations stop agreeing with the shorter bracket's,
+    ``(C,)`` codes (``limits`` where they agree up to it).
+
+    Near the top of the range a camera's codes can be off by more than noise: its
+    rendering rolls the highlights off, a raw channel clipped in a bracket pulls the
+    others through the colour matrix, or the recovered response is wrong there. For each
+    channel, observations (``grid`` ``(P, n, C)``, shortest first) whose shorter
+    neighbour is safe in every channel are compared with it (``ln`` ratio, less its
+    median over codes at 25-65 % of the range) in bins of 1/32 of the range above 70 %;
+    the shoulder is the start of the run of top bins (20 observations or more) whose
+    median is off by more than 10 %.
+    """
+    exposures = np.asarray(exposures, dtype=np.float64)
+    code_max = response.code_max
+    g = response.log_inverse
+    width = max(1, (code_max + 1) // 32)
+    mid = (int(_BASELINE[0] * code_max), int(_BASELINE[1] * code_max))
+    out = np.asarray(limits, dtype=np.int64).copy()
+    for c in range(grid.shape[-1]):
+        values, codes = [], []
+        for j in range(1, grid.shape[0]):
+            short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
+            ok = np.all(short < limits, axis=-1) & np.all(long < limits, axis=-1) \
+                & (short[:, c] >= int(_MID[0] * code_max))
+            values.append((g[long[ok, c], c] - np.log(exposures[j]))
+                          - (g[short[ok, c], c] - np.log(exposures[j - 1])))
+            codes.append(long[ok, c])
+        d, z = np.concatenate(values), np.concatenate(codes)
+        base = d[(z >= mid[0]) & (z <= mid[1])]
+        if base.size < _SHOULDER_COUNT:
+            continue
+        d = d - np.median(base)
+        start = int(_SHOULDER_FROM * code_max) // width * width
+        shoulder = int(limits[c])
+        for low in range((int(limits[c]) - 1) // width * width, start - 1, -width):
+            inside = d[(z >= low) & (z < min(low + width, int(limits[c])))]
+            if inside.size < _SHOULDER_COUNT:
+                continue
+            if abs(float(np.median(inside))) <= _SHOULDER_BIAS:
+                break
+            shoulder = low
+        out[c] = min(out[c], shoulder)
+    return out
+
+
 def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseModel,
-                      grid: np.ndarray | None = None) -> np.ndarray:
+                      grid: np.ndarray | None = None, exposures=None) -> np.ndarray:
     """The first dropped code of each channel, ``(C,)`` int64: the white level, or lower
     by the shoulder where the exposure ``f^-1(z)`` is within two of its own standard
-    deviations (``noise``) of the white level's.
+    deviations (``noise``) of the white level's, or lower still where the data disagree
+    with the shorter bracket by more than 10 % (:func:`shoulders`; when ``exposures``,
+    seconds, are given).
 
     ``codes`` ``(P, H, W, C)``; ``grid`` the noise fit's sample (:func:`noise_grid`),
     when already read.
@@ -98,6 +151,8 @@ def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseM
         while z > 1 and X[level, c] - X[z - 1, c] <= _MARGIN_SIGMAS * sigma[z - 1, c]:
             z -= 1
         limits[c] = z
+    if exposures is not None and grid.shape[0] > 1:
+        limits = shoulders(grid, response, exposures, limits)
     return limits
 
 
@@ -165,7 +220,7 @@ def policy_limits(policy: str, codes: np.ndarray, response: CameraResponse,
     if noise is None:
         noise = NoiseModel.quantisation_only(channels)
     grid = noise_grid(codes, MIXING_GRID_LIMIT)
-    limits = saturation_limits(codes, response, noise, grid)
+    limits = saturation_limits(codes, response, noise, grid, exposures)
     if policy == "safe" or exposures is None:
         return limits, True
     return limits, channel_mixing(grid, response, exposures, limits) > _MIXING_BIAS
