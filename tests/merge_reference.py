@@ -55,12 +55,5 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         merged = np.where(denominator > 0, numerator / denominator, fallback)
         if domain == "log":
             merged = np.exp(np.minimum(merged, np.log(FLOAT32_MAX)))
-        shortest = tables[0][stack.codes[0].astype(np.int64), channel_index]
-        neutral = shortest.max(axis=-1, keepdims=True)
-        if domain == "log":
-            neutral = np.exp(np.minimum(neutral, np.log(FLOAT32_MAX)))
-    # Clipped in every bracket (any channel dropped even in the shortest): neutral.
-    clipped_pixels = np.any(stack.codes[0] >= limits, axis=-1, keepdims=True)
-    merged = np.where(clipped_pixels, neutral, merged)
     radiance = np.clip(merged, FLOAT32_TINY, FLOAT32_MAX).astype(np.float32)
     return radiance, (clipped, black)

@@ -376,29 +376,6 @@ def _fallback(codes, y, x, c, channels, limits, pixel_rule,
 
 
 @njit(**_KERNEL)
-def _neutral_bound(shortest, row, limits, channels, log_domain,
-                   estimates):  # pragma: no cover - compiled
-    """Pixels clipped in every bracket (a channel at or above its limit even in the
-    ``shortest``): every channel the largest of the shortest bracket's estimates over the
-    pixel's channels, a neutral lower bound (whatever the policy: a partly clipped pixel's
-    other channels would give it a colour cast)."""
-    for x in range(shortest.size // channels):
-        clipped = False
-        for k in range(channels):
-            clipped |= shortest[x * channels + k] >= limits[k]
-        if not clipped:
-            continue
-        value = estimates[0, 0, shortest[x * channels]]
-        for k in range(1, channels):
-            value = max(value, estimates[0, k, shortest[x * channels + k]])
-        if log_domain:
-            value = math.exp(min(max(value, LOG_FLOAT32_TINY), LOG_FLOAT32_MAX))
-        value = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
-        for k in range(channels):
-            row[x * channels + k] = value
-
-
-@njit(**_KERNEL)
 def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - compiled
     """``out``: ``row``'s codes with every dropped observation set to ``Z_max`` (a code
     at or above its channel's limit; with ``pixel_rule`` all of the pixel's channels
@@ -520,5 +497,3 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, 
             skipped_rows[y] = (count - stop) * (n // channels)
             clipped_rows[y], black_rows[y] = _clipped_and_black(
                 codes[0, y], codes[count - 1, y], limits, channels)
-            if clipped_rows[y]:
-                _neutral_bound(codes[0, y], row, limits, channels, log_domain, estimates)
