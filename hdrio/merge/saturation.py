@@ -173,6 +173,8 @@ def channel_mixing(grid: np.ndarray, response: CameraResponse, exposures,
     with 10 of each); 0 when no channel has 50 partly clipped observations to compare
     (nothing clips part-way: no evidence of mixing).
     """
+    if grid.shape[0] < 2:
+        return 0.0
     exposures = np.asarray(exposures, dtype=np.float64)
     code_max = response.code_max
     low = int(_MID[0] * code_max)
@@ -220,7 +222,10 @@ def policy_limits(policy: str, codes: np.ndarray, response: CameraResponse,
     if noise is None:
         noise = NoiseModel.quantisation_only(channels)
     grid = noise_grid(codes, MIXING_GRID_LIMIT)
-    limits = saturation_limits(codes, response, noise, grid, exposures)
-    if policy == "safe" or exposures is None:
+    limits = saturation_limits(codes, response, noise, grid)
+    if exposures is None or codes.shape[0] < 2:
         return limits, True
-    return limits, channel_mixing(grid, response, exposures, limits) > _MIXING_BIAS
+    # The mixing test at the white levels: the shoulders would take away its evidence.
+    pixel_rule = policy == "safe" or channel_mixing(grid, response, exposures,
+                                                     limits) > _MIXING_BIAS
+    return shoulders(grid, response, exposures, limits), pixel_rule
