@@ -18,10 +18,16 @@ where it meets a saturated code: ``sum = (sum + term[z]) * (z != Z_max)``. What
 survives is exactly the sum over the brackets shorter than the first saturated one, with
 no per-channel state to load and store and no data-dependent branch (on this machine
 1.3x faster than carrying an "alive" flag). With the terms 0 at ``Z_max`` that is
-``sum * (z != Z_max) + term[z]``, a fused multiply-add. The tutorial's policy
-(``per_channel`` false) resets all of a pixel's channels when any one saturates.
+``sum * (z != Z_max) + term[z]``, a fused multiply-add.
 
-**Pair tables (8-bit codes, three channels, per-channel policy: the common case).** The
+**Saturation policies** (:mod:`hdrio.merge.saturation`) other than "a channel at
+``Z_max`` alone" are applied by remapping each bracket's row before it is summed, into a
+per-task buffer: a code at or above its channel's limit becomes ``Z_max``, and with the
+pixel rule so do all of that pixel's codes in that bracket. The per-channel resets then
+apply the policy, through the same pair tables (the tutorial's per-pixel policy used to
+take one look-up per code instead). ``benchmarks/speed`` times the remap.
+
+**Pair tables (8-bit codes, three channels: the common case).** The
 kernel is bound by its scalar table look-ups, about ten instructions per code value
 (this machine's AVX-512 gathers are slower still: 0.40 s against 0.34 s for a plain C
 loop over the benchmark's codes). Two brackets ``j`` (longer) and ``j - 1`` are
@@ -130,43 +136,22 @@ def _reset_add(total, keep, term):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _add_reset(total, term, keep):  # pragma: no cover - compiled
-    """``(total + term) * keep`` on both parts (the tutorial's per-pixel policy)."""
-    return complex((total.real + term.real) * keep, (total.imag + term.imag) * keep)
-
-
-@njit(**_KERNEL)
-def _accumulate(row, terms, code_max, per_channel, channels, sums):  # pragma: no cover
-    """``sum = (sum + term[z]) * (z != Z_max)`` over one bracket's row."""
+def _accumulate(row, terms, code_max, channels, sums):  # pragma: no cover - compiled
+    """``sum = sum * (z != Z_max) + term[z]`` over one bracket's row (the terms are 0 at
+    ``Z_max``, so this is ``(sum + term) * (z != Z_max)``: one fused multiply-add, 1.25x
+    faster than the product form)."""
     if channels == 3:
         t0, t1, t2 = terms[0], terms[1], terms[2]
-        if per_channel:
-            # The terms are 0 at Z_max, so "(sum + t) * r" is "sum * r + t": one fused
-            # multiply-add (1.25x faster than the product form).
-            for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
-                i = 3 * x
-                z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-                sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
-                sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
-                sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
-            return
-        for x in range(row.size // 3):
+        for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
             i = 3 * x
             z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-            r = np.float32((z0 != code_max) & (z1 != code_max) & (z2 != code_max))
-            sums[i] = _add_reset(sums[i], t0[z0], r)
-            sums[i + 1] = _add_reset(sums[i + 1], t1[z1], r)
-            sums[i + 2] = _add_reset(sums[i + 2], t2[z2], r)
+            sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
+            sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
+            sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
         return
-    for x in range(row.size // channels):
-        keep = np.float32(1.0)
-        if not per_channel:
-            for c in range(channels):
-                keep = keep * np.float32(row[x * channels + c] != code_max)
-        for c in range(channels):
-            i = x * channels + c
-            z = row[i]
-            sums[i] = _add_reset(sums[i], terms[c, z], keep * np.float32(z != code_max))
+    for i in range(row.size):
+        z = row[i]
+        sums[i] = _reset_add(sums[i], np.float32(z != code_max), terms[i % channels, z])
 
 
 @njit(**_KERNEL)
@@ -279,19 +264,19 @@ def _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max,
 
 
 @njit(**_KERNEL)
-def _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel,
+def _accumulate_by_brackets(codes, y, stop, terms, code_max,
                             sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, one look-up per code, longest first."""
     channels = terms.shape[1]
     sums[:] = 0.0
     j = stop - 1
-    if per_channel and channels == 3:
+    if channels == 3:
         while j >= 1:
             _accumulate_two(codes[j, y], codes[j - 1, y], terms[j], terms[j - 1], code_max,
                             sums)
             j -= 2
     while j >= 0:
-        _accumulate(codes[j, y], terms[j], code_max, per_channel, channels, sums)
+        _accumulate(codes[j, y], terms[j], code_max, channels, sums)
         j -= 1
 
 
@@ -483,7 +468,7 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, 
             if by_pairs:
                 _accumulate_by_pairs(source, row_of, stop, pairs, zeros, code_max, sums)
             else:
-                _accumulate_by_brackets(source, row_of, stop, terms, code_max, True, sums)
+                _accumulate_by_brackets(source, row_of, stop, terms, code_max, sums)
             row = out[y]
             if _finish(sums, row, log_domain, scale):
                 for i in range(n):
