@@ -48,7 +48,7 @@ _MIN_PILE_FRACTION = 1e-3  # and must hold this fraction of the sampled observat
 _MARGIN_SIGMAS = 2.0  # the shoulder: codes within this many sigmas of the white level
 _MIXING_BIAS = 0.03  # partly clipped observations this far off (ln E) show mixing
 _MIXING_COUNT = 50  # observations needed to say so
-MIXING_GRID_LIMIT = 2**18  # pixels sampled for the white levels and the mixing test
+MIXING_GRID_LIMIT = 2**16  # pixels sampled for the white levels and the mixing test
 _MID = (0.1,)  # the least code (fraction of Z_max) of the channels compared
 _BASELINE = (0.25, 0.65)  # codes (fractions of Z_max) whose ln ratio is the reference
 _SHOULDER_FROM = 0.7  # shoulders are looked for above this fraction of the range
@@ -83,6 +83,15 @@ def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:
     return levels
 
 
+def _pairs(grid: np.ndarray, limits: np.ndarray):
+    """Each pair of neighbouring brackets of ``grid`` ``(P, n, C)``: ``(j, shorter,
+    longer, shorter safe in every channel, longer at or above a limit in some channel)``."""
+    for j in range(1, grid.shape[0]):
+        short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
+        yield (j, short, long, np.all(short < limits, axis=-1),
+               np.any(long >= limits, axis=-1))
+
+
 def shoulders(grid: np.ndarray, response: CameraResponse, exposures,
               limits: np.ndarray) -> np.ndarray:
     """Where each channel's observations stop agreeing with the shorter bracket's,
@@ -103,16 +112,18 @@ def shoulders(grid: np.ndarray, response: CameraResponse, exposures,
     width = max(1, (code_max + 1) // 32)
     mid = (int(_BASELINE[0] * code_max), int(_BASELINE[1] * code_max))
     out = np.asarray(limits, dtype=np.int64).copy()
-    for c in range(grid.shape[-1]):
-        values, codes = [], []
-        for j in range(1, grid.shape[0]):
-            short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-            ok = np.all(short < limits, axis=-1) & np.all(long < limits, axis=-1) \
-                & (short[:, c] >= int(_MID[0] * code_max))
-            values.append((g[long[ok, c], c] - np.log(exposures[j]))
-                          - (g[short[ok, c], c] - np.log(exposures[j - 1])))
-            codes.append(long[ok, c])
-        d, z = np.concatenate(values), np.concatenate(codes)
+    channels = grid.shape[-1]
+    values: list[list[np.ndarray]] = [[] for _ in range(channels)]
+    codes: list[list[np.ndarray]] = [[] for _ in range(channels)]
+    for j, short, long, safe_short, clipped_long in _pairs(grid, limits):
+        both = safe_short & ~clipped_long
+        for c in range(channels):
+            ok = both & (short[:, c] >= int(_MID[0] * code_max))
+            values[c].append((g[long[ok, c], c] - np.log(exposures[j]))
+                             - (g[short[ok, c], c] - np.log(exposures[j - 1])))
+            codes[c].append(long[ok, c])
+    for c in range(channels):
+        d, z = np.concatenate(values[c]), np.concatenate(codes[c])
         base = d[(z >= mid[0]) & (z <= mid[1])]
         if base.size < _SHOULDER_COUNT:
             continue
@@ -181,18 +192,21 @@ def channel_mixing(grid: np.ndarray, response: CameraResponse, exposures,
     width = max(1, (code_max + 1) // 16)
     g = response.log_inverse
     channels = grid.shape[-1]
+    values: list[list[np.ndarray]] = [[] for _ in range(channels)]
+    partly: list[list[np.ndarray]] = [[] for _ in range(channels)]
+    codes: list[list[np.ndarray]] = [[] for _ in range(channels)]
+    for j, short, long, safe_short, clipped_long in _pairs(grid, limits):
+        for c in range(channels):
+            ok = safe_short & (short[:, c] >= low) & (long[:, c] >= low) \
+                & (long[:, c] < limits[c])
+            values[c].append((g[long[ok, c], c] - np.log(exposures[j]))
+                             - (g[short[ok, c], c] - np.log(exposures[j - 1])))
+            codes[c].append(long[ok, c])
+            partly[c].append(clipped_long[ok])
     bias = 0.0
     for c in range(channels):
-        values, bins, partly = [], [], []
-        for j in range(1, grid.shape[0]):
-            short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-            ok = np.all(short < limits, axis=-1) & (short[:, c] >= low) \
-                & (long[:, c] >= low) & (long[:, c] < limits[c])
-            values.append((g[long[ok, c], c] - np.log(exposures[j]))
-                          - (g[short[ok, c], c] - np.log(exposures[j - 1])))
-            bins.append(long[ok, c] // width)
-            partly.append(np.any(long[ok] >= limits, axis=-1))
-        d, b, p = np.concatenate(values), np.concatenate(bins), np.concatenate(partly)
+        d, p = np.concatenate(values[c]), np.concatenate(partly[c])
+        b = np.concatenate(codes[c]) // width
         if np.count_nonzero(p) < _MIXING_COUNT:
             continue
         total = weight = 0.0
