@@ -28,7 +28,7 @@ from hdrio.io.masks import read_masks
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw, is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
-from hdrio.merge.debevec1997 import MergeStatistics
+from hdrio.merge.debevec1997 import MergeStatistics, clipped_everywhere_mask
 from hdrio.merge.estimators import (
     MERGE_METHODS,
     NOISE_AWARE,
@@ -68,9 +68,10 @@ class MergeOptions:
     # on the truth harness's core stacks median error 1.03 % against 1.25 % for the
     # tutorial's log-domain triangle-weighted mean ("log"), p99 3.4 % against 4.8 %.
     merge: str = "inverse-variance"
-    # Drop a saturated channel on its own, not the whole pixel (the tutorial's "pixel"):
-    # see hdrio/merge/debevec1997.py.
-    saturation: str = "channel"
+    # "auto": an observation counts only where every channel is safely below its own white
+    # level when the stack shows its channels mixed after the clip (hue-true on camera
+    # JPEGs), else channel by channel (hdrio/merge/saturation.py).
+    saturation: str = "auto"
     exclude_colour: tuple[int, ...] | None = None
     # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.
     masks: tuple[str, ...] = ()
@@ -103,6 +104,7 @@ class MergeOptions:
     # auto | off.
     deghost: str = "auto"
     motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
+    clip_mask: bool = False  # pixels clipped in every bracket as an EXR channel "clipped.Y"
 
     def __post_init__(self) -> None:
         check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
@@ -294,14 +296,15 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         statistics = masked_statistics(stack.codes, excluded, stack.code_max, statistics)
     elif merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
-                     options.saturation == "channel")
+                     not statistics.pixel_rule)  # the policy's rule, at Z_max
     timings["deghost"] += time.perf_counter() - start
     start = time.perf_counter()
     uncertainty = None
     if options.uncertainty:
         say("predicting each pixel's uncertainty")
         uncertainty = relative_uncertainty(merged, response, weights, noise,
-                                           merge_domain(method), options.saturation)
+                                           merge_domain(method),
+                                           "pixel" if statistics.pixel_rule else "channel")
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
     timings["merge"] += time.perf_counter() - start
@@ -352,6 +355,14 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:saturation": options.saturation,
         "hdrio:clippedFraction": result.statistics.clipped_fraction,
     }
+    if result.statistics.limits:
+        attributes["hdrio:saturationRule"] = saturation_rule(result.statistics)
+        attributes["hdrio:saturationLimits"] = ", ".join(
+            f"{name} {limit}" for name, limit in zip("RGB" if response.channels == 3 else "Y",
+                                                      result.statistics.limits))
+    if options.clip_mask:
+        attributes["hdrio:clipMask"] = ("layer clipped: 1 where the pixel is clipped in "
+                                        "every bracket (merged to a neutral lower bound)")
     attributes.update(capture_attributes(stack))
     if result.exposures is not None:
         attributes.update(result.exposures.attributes())
@@ -389,6 +400,13 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         supported.append(f"{name} {codes[0]}-{codes[-1]}" if codes.size else f"{name} none")
     attributes["hdrio:responseSupport"] = ", ".join(supported)
     return attributes
+
+
+def saturation_rule(statistics: MergeStatistics) -> str:
+    """What the saturation policy dropped, in words (the summary, ``hdrio:saturationRule``)."""
+    if statistics.pixel_rule:
+        return "pixel: an observation with any channel at its limit is dropped whole"
+    return "channel: a channel at its limit is dropped alone"
 
 
 def exposure_text(seconds: float) -> str:
@@ -506,6 +524,25 @@ def output_pixels(result: MergeResult) -> np.ndarray:
                            result.options.ocio_config)
 
 
+def merge_layers(result: MergeResult) -> dict[str, np.ndarray]:
+    """The EXR layers the options ask for beside the pixels: ``uncertainty``, ``motion``
+    (``--motion-layer``), ``clipped`` (``--clip-mask``)."""
+    options = result.options
+    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
+    if options.motion_layer and result.motion.deghosting is not None:
+        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
+    if options.clip_mask:
+        limits = result.statistics.limits or (result.stack.code_max,) * result.stack.shape[2]
+        layers["clipped"] = clipped_everywhere_mask(result.stack.codes[0], limits)
+    return layers
+
+
+def merge_alpha(result: MergeResult) -> np.ndarray | None:
+    """The EXR's alpha, ``(H, W, 1)``: 0 where every bracket was masked out (``--mask``,
+    ``--exclude-color``), 1 elsewhere; None when nothing was masked everywhere."""
+    return None if result.unseen is None else (~result.unseen)[..., None].astype(np.float32)
+
+
 def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, object], *,
                    pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
                    alpha: np.ndarray | None = None,
@@ -571,20 +608,17 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                   and not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"))
     if compile_ahead:
         jit.compile_ahead(tonemap if tonemapped else None, observe is not None,
-                          merge=options.saturation == "channel" and _eight_bit_rgb(paths))
+                          merge=_eight_bit_rgb(paths))
     result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
                          options=options, progress=progress, read_progress=read_progress)
     if observe is not None:
         jit.announce(say, "check")
     start = time.perf_counter()
     say(f"writing {output}")
-    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
-    if options.motion_layer and result.motion.deghosting is not None:
-        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
-    alpha = None if result.unseen is None else (~result.unseen)[..., None].astype(np.float32)
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
-                                           alpha=alpha, observe=observe, layers=layers)
+                                           alpha=merge_alpha(result), observe=observe,
+                                           layers=merge_layers(result))
     result.timings["write"] = time.perf_counter() - start
     if preview is not None:
         start = time.perf_counter()

@@ -146,3 +146,10 @@ def validate_stack(stack: ExposureStack) -> None:
         return  # every value fits: no pass over the codes needed
     if codes.min() < 0 or codes.max() > stack.code_max:
         raise InputError(files[0], f"code values outside 0..{stack.code_max}")
+
+
+def exposure_columns(exposures) -> np.ndarray:
+    """Exposures ``(P,)`` or per channel ``(P, C)`` (:attr:`ExposureStack.channel_exposures`)
+    as float64 ``(P, 1)`` or ``(P, C)``, to broadcast against per-channel tables."""
+    exposures = np.asarray(exposures, dtype=np.float64)
+    return exposures[:, None] if exposures.ndim == 1 else exposures

@@ -136,3 +136,110 @@ def radiance_error(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray | N
         "scale": scale,
         "invalid": int(np.count_nonzero(~valid)),
     }
+
+
+# -------------------------------------------------------------- a camera-like pipeline
+
+CANON_5D_MARK_II_XYZ_TO_CAMERA = np.array([[0.4716, 0.0603, -0.0830],
+                                            [-0.7798, 1.5474, 0.2480],
+                                            [-0.1496, 0.1937, 0.6651]])
+"""The camera's colour matrix, CIE XYZ (D65) to raw RGB, as dcraw and Adobe DNG Converter
+tabulate it (``adobe_coeff``, divided by 10000): the camera of ``frobisher_001``."""
+
+SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805],
+                        [0.2126, 0.7152, 0.0722],
+                        [0.0193, 0.1192, 0.9505]])
+"""Linear sRGB / Rec. 709 (D65) to CIE XYZ (IEC 61966-2-1)."""
+
+
+def camera_matrices(xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """dcraw's ``cam_xyz_coeff`` for a scene in linear Rec. 709.
+
+    Returns
+    -------
+    camera_from_working
+        ``(3, 3)``: white-balanced raw RGB from linear Rec. 709, rows summing to 1 (a
+        white scene gives equal white-balanced raw values).
+    working_from_camera
+        Its inverse: what the camera's JPEG engine applies after white balance.
+    gains
+        ``(3,)`` daylight white-balance multipliers, the least 1 (green): raw channel
+        ``c`` is white-balanced raw ``c`` divided by ``gains[c]``.
+    """
+    camera_rgb = np.asarray(xyz_to_camera, dtype=np.float64) @ SRGB_TO_XYZ
+    gains = 1.0 / camera_rgb.sum(axis=1)
+    camera_from_working = camera_rgb * gains[:, None]
+    return camera_from_working, np.linalg.inv(camera_from_working), gains / gains.min()
+
+
+def render_camera_brackets(radiance: np.ndarray, exposures, response: Response = gamma_response,
+                           mixing: bool = True, bit_depth: int = 8,
+                           shot_noise: float = DEFAULT_SHOT_NOISE,
+                           read_noise: float = DEFAULT_READ_NOISE, seed: int = 0,
+                           xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Brackets as a camera's JPEG engine makes them, ``(P, H, W, 3)`` codes.
+
+    Per bracket (exposure ``t`` seconds; ``radiance`` linear Rec. 709, relative):
+
+    1. raw RGB ``= camera_from_working @ (radiance t) / gains`` (:func:`camera_matrices`):
+       the sensor's own channels, green the most sensitive;
+    2. shot and read noise (as :func:`render_brackets`), then each raw channel clipped
+       at the sensor's white level 1: the channels clip at different scene levels;
+    3. white balance: times ``gains``, clipped at 1 (a raw clip stays a clip);
+    4. the colour matrix ``working_from_camera`` back to Rec. 709, clipped to [0, 1]:
+       a clipped raw channel now pulls the *other* output channels, below the top code
+       (the colour casts and bands of partly clipped highlights);
+    5. the response ``f`` and quantisation to ``bit_depth`` bits.
+
+    ``mixing=False`` is the same camera without channel mixing (both matrices the
+    identity; the same gains, noise and clipping): the control of the hue tests.
+
+    Returns
+    -------
+    codes
+        ``(P, H, W, 3)`` uint8 or uint16.
+    raw_clipped
+        ``(P, H, W, 3)`` booleans: raw channel clipped (step 2 or 3) in that bracket.
+    """
+    rng = np.random.default_rng(seed)
+    code_max = 2**bit_depth - 1
+    dtype = np.uint8 if bit_depth <= 8 else np.uint16
+    camera_from_working, working_from_camera, gains = camera_matrices(xyz_to_camera)
+    if not mixing:
+        camera_from_working = working_from_camera = np.eye(3)
+    radiance = np.asarray(radiance, dtype=np.float64)
+    raw_linear = np.maximum(radiance @ camera_from_working.T, 0.0) / gains
+    codes = np.empty((len(exposures), *radiance.shape), dtype=dtype)
+    clipped = np.empty((len(exposures), *radiance.shape), dtype=bool)
+    for j, t in enumerate(exposures):
+        X = raw_linear * t
+        X = X + rng.standard_normal(X.shape) * np.sqrt(shot_noise * np.clip(X, 0, 1)
+                                                       + read_noise**2)
+        balanced = np.clip(X, 0.0, 1.0) * gains
+        clipped[j] = balanced >= 1.0
+        output = np.clip(np.minimum(balanced, 1.0) @ working_from_camera.T, 0.0, 1.0)
+        codes[j] = np.clip(np.rint(response(output) * code_max), 0, code_max).astype(dtype)
+    return codes, clipped
+
+
+def hue_angle_error(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray,
+                    min_chroma: float = 0.02) -> np.ndarray:
+    """Hue angle error in degrees, ``(n,)``, over ``mask`` pixels with a hue.
+
+    The hue is the angle of the chromaticity ``(r, g) = (R, G) / (R + G + B)`` of linear
+    RGB about the white ``(1/3, 1/3)`` (the working space's own chromaticity plane);
+    pixels whose true chromaticity lies within ``min_chroma`` of white have no hue to
+    keep and are left out. Scale-free: no exposure match is needed.
+    """
+    def hue_and_chroma(rgb):
+        rgb = np.asarray(rgb, dtype=np.float64)[mask]
+        total = np.maximum(rgb.sum(axis=-1, keepdims=True), 1e-30)
+        r, g = (rgb[:, :2] / total - 1.0 / 3.0).T
+        return np.arctan2(g, r), np.hypot(r, g)
+
+    hue, _ = hue_and_chroma(estimate)
+    true_hue, chroma = hue_and_chroma(truth)
+    difference = np.angle(np.exp(1j * (hue - true_hue)))
+    return np.degrees(np.abs(difference[chroma >= min_chroma]))

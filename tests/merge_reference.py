@@ -17,8 +17,12 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def merge_reference(stack, response, weighting="Debevec1997", domain="log",
-                    saturation="channel"):
-    """Radiance ``(H, W, C)`` float32 and ``(clipped, black)`` pixel counts."""
+                    saturation="channel", limits=None):
+    """Radiance ``(H, W, C)`` float32 and ``(clipped, black)`` pixel counts.
+
+    ``limits`` ``(C,)``: the first dropped code per channel (``safe``; ``Z_max`` else)."""
+    if saturation != "safe" or limits is None:
+        limits = np.full(stack.codes.shape[-1], stack.code_max)
     count, height, width, channels = stack.codes.shape
     weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
     tables = estimate_tables(response, stack.exposures, domain)
@@ -29,8 +33,8 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
     fallback = None
     for j in range(count):
         codes = stack.codes[j].astype(np.int64)
-        saturated = codes == stack.code_max
-        if saturation == "pixel":
+        saturated = codes >= limits
+        if saturation != "channel":
             saturated = np.repeat(np.any(saturated, axis=-1, keepdims=True), channels, -1)
         dropped |= saturated
         keep = ~dropped
@@ -38,9 +42,14 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
         weight = np.where(keep, weights[codes, channel_index], 0.0)
         numerator += weight * estimate
         denominator += weight
-        fallback = estimate if fallback is None else np.where(keep, estimate, fallback)
         if j == 0:
-            clipped = int(np.count_nonzero(np.any(codes == stack.code_max, axis=-1)))
+            clipped = int(np.count_nonzero(np.any(codes >= limits, axis=-1)))
+            # Clipped everywhere: a neutral lower bound (the largest channel's estimate),
+            # where the pixel is dropped whole; a channel dropped alone keeps its own.
+            whole = np.all(saturated, axis=-1, keepdims=True)
+            fallback = np.where(whole, estimate.max(axis=-1, keepdims=True), estimate)
+        else:
+            fallback = np.where(keep, estimate, fallback)
     black = int(np.count_nonzero(np.all(stack.codes[-1] == 0, axis=-1)))
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         merged = np.where(denominator > 0, numerator / denominator, fallback)

@@ -53,15 +53,19 @@ def _rtol(domain: str) -> float:
 
 @pytest.mark.parametrize("code_max", [255, 4095, 65535])
 @pytest.mark.parametrize("domain", ["log", "linear"])
-@pytest.mark.parametrize("saturation", ["channel", "pixel"])
+@pytest.mark.parametrize("saturation", ["channel", "pixel", "safe"])
 @pytest.mark.parametrize("weighting", ["Debevec1997", "tutorial-hat", "gaussian"])
 def test_kernel_matches_numpy_port(code_max, domain, saturation, weighting):
     stack = _stack(code_max)
     # Part of the code range unsupported, as after a solve that saw no dark samples.
     response = _response(code_max, supported_from=code_max // 20)
-    radiance, stats = merge_brackets(stack, response, weighting, domain, saturation)
+    # "safe": each channel dropped from its own limit (a white level and shoulder below
+    # the top code, different per channel).
+    limits = np.rint(code_max * np.array([0.97, 0.9, 0.99])).astype(int)
+    radiance, stats = merge_brackets(stack, response, weighting, domain, saturation,
+                                     limits=limits)
     expected, (clipped, black) = merge_reference(stack, response, weighting, domain,
-                                                 saturation)
+                                                 saturation, limits)
     np.testing.assert_allclose(radiance, expected, rtol=_rtol(domain))
     assert (stats.clipped_everywhere, stats.black_everywhere) == (clipped, black)
     assert clipped > 0 and black > 0
@@ -95,7 +99,7 @@ def test_rejects_unknown_saturation_policy():
         merge_brackets(_stack(255, count=2), _response(255), saturation="any")
 
 
-@pytest.mark.parametrize("saturation", ["channel", "pixel"])
+@pytest.mark.parametrize("saturation", ["channel", "pixel", "safe"])
 def test_early_stop_skips_saturated_rows_and_changes_nothing(saturation):
     # Rows 0-5 are bright enough to saturate every channel from the third bracket on:
     # the kernel never reads those bracket rows, and the result is still the oracle's.

@@ -48,6 +48,11 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
             _ratio(rows, "OpenCV MergeDebevec", "hdrio merge (inverse-variance)"),
         "merge: hdrio (inverse-variance, noise fit included) / hdrio (log)":
             _ratio(rows, "hdrio merge (inverse-variance)", "hdrio merge (log)"),
+        "merge: hdrio (log, pixel rule: rows remapped) / hdrio (log, per channel)":
+            _ratio(rows, "hdrio merge (log, pixel rule)", "hdrio merge (log)"),
+        "merge: hdrio (inverse-variance, auto saturation) / (channel saturation)":
+            _ratio(rows, "hdrio merge (inverse-variance)",
+                   "hdrio merge (inverse-variance, channel saturation)"),
         "merge: hdrio (log) / floor": _ratio(rows, "hdrio merge (log)",
                                              "floor (copy of the codes, all cores)"),
         "merge: hdrio (linear) / floor": _ratio(rows, "hdrio merge (linear)",

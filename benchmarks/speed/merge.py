@@ -34,11 +34,20 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
         "log": lambda: merge_brackets(stack, response, domain="log")[0],
         "linear": lambda: merge_brackets(stack, response, domain="linear")[0],
         "inverse-variance": lambda: MERGE_METHODS["inverse-variance"](stack, response)[0],
+        # The saturation policies' cost: the per-channel policy at Z_max reads the codes
+        # as they are; every other policy remaps each bracket's row first (the pixel
+        # rule, limits below Z_max); "auto" also samples the codes for its white levels
+        # and mixing test (hdrio.merge.saturation).
+        "log, pixel rule": lambda: merge_brackets(stack, response, domain="log",
+                                                  saturation="pixel")[0],
+        "inverse-variance, channel saturation": lambda: MERGE_METHODS["inverse-variance"](
+            stack, response, saturation="channel")[0],
     }, repeats)
     destination = None
     rows.append({"row": "merge", "method": "floor (copy of the codes, all cores)",
                  "seconds": timings["floor"].seconds, "peak_mb": timings["floor"].peak_mb})
-    for domain in ("log", "linear", "inverse-variance"):
+    for domain in ("log", "linear", "inverse-variance", "log, pixel rule",
+                   "inverse-variance, channel saturation"):
         timing = timings[domain]
         error = radiance_error(timing.result, radiance, mask)
         rows.append({"row": "merge", "method": f"hdrio merge ({domain})",

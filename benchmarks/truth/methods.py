@@ -193,6 +193,12 @@ HDRIO_VARIANTS: dict[str, tuple[MergeOptions, str]] = {
                        "the tutorial's hat weights, sample grid and per-pixel saturation"),
     "hdrio pixel saturation": (MergeOptions(saturation="pixel"),
                                "default with the tutorial's per-pixel saturation policy"),
+    "hdrio channel saturation": (MergeOptions(saturation="channel"),
+                                 "default with the per-channel saturation policy (the "
+                                 "default before the safe policy)"),
+    "hdrio safe saturation": (MergeOptions(saturation="safe"),
+                              "default with the safe saturation policy (every channel "
+                              "below its white level less the noise's margin)"),
     "hdrio linear": (MergeOptions(merge="linear"), "default response, triangle-weighted "
                      "merge in the linear domain"),
     "hdrio lambda 10": (MergeOptions(smoothing=10.0), "default with lambda 10"),

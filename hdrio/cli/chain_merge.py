@@ -91,7 +91,13 @@ def _optional_domain(token: str) -> bool:
                 "same names: --lambda, --weighting, --uncertainty, --colorspace...)",
            example="a.jpg b.jpg c.jpg --lambda 10 --merge log -o out.exr")
 def _merge(chain: Chain, domain: str | None) -> None:
-    from hdrio.pipeline import exr_attributes, merge_paths, output_pixels
+    from hdrio.pipeline import (
+        exr_attributes,
+        merge_alpha,
+        merge_layers,
+        merge_paths,
+        output_pixels,
+    )
 
     if not chain.brackets:
         raise ChainError("no brackets to merge: give the bracket files before --merge")
@@ -105,10 +111,6 @@ def _merge(chain: Chain, domain: str | None) -> None:
     chain.last_merge = result
     for line in result.exposures.warnings() if result.exposures is not None else ():
         print(f"hdrio: warning: {line}", file=sys.stderr)
-    layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
-    if options.motion_layer and result.motion.deghosting is not None:
-        layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
     chain.images.append(Image(output_pixels(result), exr_attributes(result),
                               f"merge of {result.stack.count} brackets", statistics=result,
-                              layers=layers, alpha=None if result.unseen is None
-                              else (~result.unseen)[..., None].astype(np.float32)))
+                              layers=merge_layers(result), alpha=merge_alpha(result)))

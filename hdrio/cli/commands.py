@@ -18,7 +18,7 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
-from hdrio.pipeline import MergeOptions, MergeResult, merge_files
+from hdrio.pipeline import MergeOptions, MergeResult, merge_files, saturation_rule
 from hdrio.tonemap import TONEMAP_METHODS
 
 
@@ -150,10 +150,13 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
-        f"bracket {100 * stats.clipped_fraction:.2f} %, black in every "
+        f"bracket {100 * stats.clipped_fraction:.2f} % (a neutral lower "
+        f"bound{', layer clipped.Y' if result.options.clip_mask else ''}), black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %"
         + (f"; masked in every bracket {100 * stats.masked_everywhere / stats.pixels:.2f} "
            "% (alpha 0, not counted)" if stats.masked_everywhere else ""),
+        f"clipping:  --saturation {result.options.saturation}, {saturation_rule(stats)}"
+        + (f" (limits {', '.join(str(v) for v in stats.limits)})" if stats.limits else ""),
         *motion_lines(result),
         *[f"nd:        {line}" for line in (result.nd.lines() if result.nd else [])],
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],

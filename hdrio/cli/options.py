@@ -54,6 +54,7 @@ from hdrio.cli.values import (
     whole,
 )
 from hdrio.errors import HdrioError
+from hdrio.merge.saturation import SATURATION_POLICIES
 
 __all__ = ["MERGE_OPTIONS", "OPTIONS_BY_NAME", "Option", "add_arguments", "merge_method",
            "merge_options", "set_value", "settings_from_namespace", "tonemap_arguments"]
@@ -175,11 +176,16 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--uncertainty", (), "uncertainty", flag, example=(),
            help="also write each pixel's predicted relative standard deviation (from the "
                 "noise model) as the EXR layer 'uncertainty', summarised by hdrio check"),
-    Option("--saturation", ("POLICY",), "saturation", choice("channel", "pixel"),
+    Option("--saturation", ("POLICY",), "saturation", choice(*SATURATION_POLICIES),
            example=("pixel",),
-           help="a code at the top of the range drops that channel ('channel', default) or "
-                "the whole pixel ('pixel', the tutorial's) from its bracket and every "
-                "longer one"),
+           help="which observations near clipping are dropped, from their bracket and "
+                "every longer one: 'safe' (default: the whole observation unless every "
+                "channel is safely below its own white level, found in the data), "
+                "'pixel' (the tutorial's: any channel at the top code) or 'channel' (a "
+                "channel at the top code alone; wrong hues where a camera mixes channels)"),
+    Option("--clip-mask", (), "clip_mask", flag, example=(),
+           help="also write the pixels clipped in every bracket (merged to a neutral "
+                "lower bound) as the EXR channel clipped.Y, counted by hdrio check"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
            help="keep pixels of this code value out of the solve and the merge (e.g. "

@@ -10,20 +10,28 @@ Two domains, two saturation policies:
     by noise, since the mean of logs underestimates).
 
 Weights are per channel, ``w`` of that channel's own code. Saturation drops an
-observation at ``Z_max`` in bracket ``j`` from ``j`` and from every longer exposure:
+observation in bracket ``j`` from ``j`` and from every longer exposure; which ones, the
+saturation policy says (:mod:`hdrio.merge.saturation`):
 
+``safe`` (the default)
+    an observation with any channel at or above its safe limit (its white level, found
+    in the data, less the noise's margin) is dropped whole, all its channels;
 ``pixel`` (the tutorial's policy)
     a pixel with any channel at ``Z_max`` is dropped whole, all its channels;
-``channel`` (the default)
+``channel``
     only the saturated channel is dropped. A pixel whose red clips in the longer
     brackets keeps their green and blue, which the tutorial's policy throws away: on the
     truth harness's StillLife stacks this takes the p99 error from 9.5 % to 2.8 % with
-    the true response (docs/accuracy.md).
+    the true response (docs/accuracy.md); but a real camera mixes its channels after the
+    clip, and there it keeps biased observations (false hues at clipped edges).
 
-A channel saturated even in the shortest bracket takes that bracket's estimate alone; a
-channel with zero total weight otherwise (only possible with a weighting that is zero at
-the ends, for pixels black in every bracket) takes the longest usable bracket's
-estimate. Every output value is therefore finite and positive.
+A pixel dropped even from the shortest bracket (clipped in every bracket) takes a
+neutral lower bound: every channel the largest of that bracket's estimates over the
+pixel's channels (with ``channel``, only where every channel is clipped; a channel
+clipped alone takes that bracket's estimate). A channel with zero total weight otherwise
+(only possible with a weighting that is zero at the ends, for pixels black in every
+bracket) takes the longest usable bracket's estimate. Every output value is therefore
+finite and positive.
 
 The tutorial finds its fallback pixels as those whose sum is exactly 0; we track the
 saturation instead, which agrees except where a sum happens to cancel to 0. The work is
@@ -39,10 +47,11 @@ import numpy as np
 
 from hdrio.io.staging import is_staged, release
 from hdrio.merge.kernel import MAX_BRACKETS, PAIR_LEVELS, merge_kernel, pair_tables
+from hdrio.merge.saturation import SATURATION_POLICIES
 from hdrio.merge.weighting import weights_table
 from hdrio.parallel import threads
 from hdrio.response.curve import CameraResponse
-from hdrio.stack import ExposureStack
+from hdrio.stack import ExposureStack, exposure_columns
 
 
 @dataclass(frozen=True)
@@ -51,7 +60,8 @@ class MergeStatistics:
 
     pixels: int
     clipped_everywhere: int
-    """Saturated (a channel at ``Z_max``) even in the shortest bracket."""
+    """Dropped by the saturation policy (a channel at or above its limit) even in the
+    shortest bracket."""
     black_everywhere: int
     """Code 0 in every channel even in the longest bracket."""
     observations_skipped: int = 0
@@ -60,6 +70,10 @@ class MergeStatistics:
     masked_everywhere: int = 0
     """Excluded in every bracket (``--exclude-color``, ``--mask``): unseen, alpha 0, and
     not counted as clipped or black (:mod:`hdrio.merge.exclusion`)."""
+    limits: tuple[int, ...] = ()
+    """The first code of each channel the saturation policy dropped."""
+    pixel_rule: bool = False
+    """A dropped channel dropped the whole observation."""
 
     @property
     def clipped_fraction(self) -> float:
@@ -67,18 +81,9 @@ class MergeStatistics:
         return self.clipped_everywhere / max(1, self.pixels - self.masked_everywhere)
 
 
-SATURATION_POLICIES = ("channel", "pixel")
-
 MERGE_BAND_ROWS = 128
 """Rows merged per kernel call when the codes are staged in a file (each band's pages are
 released after it: 128 rows of seven 24 MP brackets hold 16 MB)."""
-
-
-def exposure_columns(exposures) -> np.ndarray:
-    """Exposures ``(P,)`` or per channel ``(P, C)`` (:attr:`ExposureStack.channel_exposures`)
-    as float64 ``(P, 1)`` or ``(P, C)``, to broadcast against per-channel tables."""
-    exposures = np.asarray(exposures, dtype=np.float64)
-    return exposures[:, None] if exposures.ndim == 1 else exposures
 
 
 def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str) -> np.ndarray:
@@ -93,12 +98,16 @@ def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
                    saturation: str = "channel", early_stop: bool = True,
-                   weights: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, MergeStatistics]:
+                   weights: np.ndarray | None = None, limits: np.ndarray | None = None,
+                   pixel_rule: bool = False) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
 
-    ``saturation`` is ``"channel"`` (default: a saturated channel is dropped on its own)
-    or ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel).
+    ``saturation`` is ``"channel"`` (a saturated channel is dropped on its own),
+    ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel), ``"safe"``
+    (a channel at or above its entry of ``limits``, ``(C,)`` codes from
+    :func:`hdrio.merge.saturation.policy_limits`, drops the whole pixel; ``Z_max`` when
+    not given) or ``"auto"`` (``limits`` with the pixel rule when ``pixel_rule``, else
+    per channel).
     ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
     result to float32 rounding). ``weights``, when given, are per-bracket weights
     ``w_j(z)`` ``(P, C, code_max + 1)`` in place of ``weighting``'s ``w(z)`` (the
@@ -128,7 +137,11 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
     terms, estimates = merge_tables(response, stack.channel_exposures, weighting, domain,
                                     weights)
-    if saturation == "channel" and channels == 3 and stack.code_max < PAIR_LEVELS:
+    if saturation in ("channel", "pixel") or limits is None:
+        limits = np.full(channels, stack.code_max)
+    limits = np.ascontiguousarray(np.clip(limits, 1, stack.code_max), dtype=np.int64)
+    pixel_rule = saturation in ("pixel", "safe") or (saturation == "auto" and pixel_rule)
+    if channels == 3 and stack.code_max < PAIR_LEVELS:
         pairs = pair_tables(terms, stack.code_max)
     else:
         pairs = np.empty((0, channels, 1), np.complex64)  # the general path
@@ -142,14 +155,23 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     for top in range(0, height, band):
         bottom = min(height, top + band)
         merge_kernel(codes, top, bottom, terms, estimates, pairs, stack.code_max,
-                     saturation == "channel", domain == "log", early_stop,
+                     limits, pixel_rule, domain == "log", early_stop,
                      radiance.reshape(height, width * channels), *counts)
         release(stack.codes, None, top, bottom)
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=int(counts[0].sum()),
         black_everywhere=int(counts[1].sum()), observations_skipped=int(counts[2].sum()),
+        limits=tuple(int(v) for v in limits), pixel_rule=bool(pixel_rule),
     )
     return radiance, statistics
+
+
+def clipped_everywhere_mask(shortest: np.ndarray, limits) -> np.ndarray:
+    """``(H, W)`` float32: 1 where a channel of the shortest bracket's codes ``(H, W, C)``
+    is at or above its limit (:attr:`MergeStatistics.limits`): the pixels the merge
+    gave a neutral lower bound (or, with the ``channel`` policy, a channel's own)."""
+    limits = np.asarray(limits, dtype=np.int64)
+    return np.any(shortest >= limits, axis=-1).astype(np.float32)
 
 
 def code_weights(response: CameraResponse, weighting: str) -> np.ndarray:

@@ -39,7 +39,6 @@ import numpy as np
 from hdrio.merge.debevec1997 import (
     MergeStatistics,
     code_weights,
-    exposure_columns,
     merge_brackets,
 )
 from hdrio.merge.noise import (
@@ -49,9 +48,10 @@ from hdrio.merge.noise import (
     observation_variance,
     usable_codes,
 )
+from hdrio.merge.saturation import policy_limits
 from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
-from hdrio.stack import ExposureStack
+from hdrio.stack import ExposureStack, exposure_columns
 
 NOISE_AWARE = ("inverse-variance", "Poisson")
 """Estimators whose weights read the noise model."""
@@ -116,14 +116,16 @@ def merge_domain(method: str) -> str:
 
 def _merge(method: str):
     def merge(stack: ExposureStack, response: CameraResponse, weighting: str = "Debevec1997",
-              saturation: str = "channel", early_stop: bool = True,
+              saturation: str = "auto", early_stop: bool = True,
               noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
         if method in NOISE_AWARE and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,
                               code_floor=code_variance_floor(stack.files))
         weights = merge_weights(method, response, stack.channel_exposures, noise)
+        limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,
+                                           stack.exposures)
         return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
-                              early_stop, weights)
+                              early_stop, weights, limits, pixel_rule)
 
     merge.__name__ = f"merge_{method.replace('-', '_')}"
     merge.__doc__ = (f"Merge ``stack`` with the ``{method}`` estimator (see "

@@ -18,10 +18,16 @@ where it meets a saturated code: ``sum = (sum + term[z]) * (z != Z_max)``. What
 survives is exactly the sum over the brackets shorter than the first saturated one, with
 no per-channel state to load and store and no data-dependent branch (on this machine
 1.3x faster than carrying an "alive" flag). With the terms 0 at ``Z_max`` that is
-``sum * (z != Z_max) + term[z]``, a fused multiply-add. The tutorial's policy
-(``per_channel`` false) resets all of a pixel's channels when any one saturates.
+``sum * (z != Z_max) + term[z]``, a fused multiply-add.
 
-**Pair tables (8-bit codes, three channels, per-channel policy: the common case).** The
+**Saturation policies** (:mod:`hdrio.merge.saturation`) other than "a channel at
+``Z_max`` alone" are applied by remapping each bracket's row before it is summed, into a
+per-task buffer: a code at or above its channel's limit becomes ``Z_max``, and with the
+pixel rule so do all of that pixel's codes in that bracket. The per-channel resets then
+apply the policy, through the same pair tables (the tutorial's per-pixel policy used to
+take one look-up per code instead). ``benchmarks/speed`` times the remap.
+
+**Pair tables (8-bit codes, three channels: the common case).** The
 kernel is bound by its scalar table look-ups, about ten instructions per code value
 (this machine's AVX-512 gathers are slower still: 0.40 s against 0.34 s for a plain C
 loop over the benchmark's codes). Two brackets ``j`` (longer) and ``j - 1`` are
@@ -129,43 +135,22 @@ def _reset_add(total, keep, term):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _add_reset(total, term, keep):  # pragma: no cover - compiled
-    """``(total + term) * keep`` on both parts (the tutorial's per-pixel policy)."""
-    return complex((total.real + term.real) * keep, (total.imag + term.imag) * keep)
-
-
-@njit(**_KERNEL)
-def _accumulate(row, terms, code_max, per_channel, channels, sums):  # pragma: no cover
-    """``sum = (sum + term[z]) * (z != Z_max)`` over one bracket's row."""
+def _accumulate(row, terms, code_max, channels, sums):  # pragma: no cover - compiled
+    """``sum = sum * (z != Z_max) + term[z]`` over one bracket's row (the terms are 0 at
+    ``Z_max``, so this is ``(sum + term) * (z != Z_max)``: one fused multiply-add, 1.25x
+    faster than the product form)."""
     if channels == 3:
         t0, t1, t2 = terms[0], terms[1], terms[2]
-        if per_channel:
-            # The terms are 0 at Z_max, so "(sum + t) * r" is "sum * r + t": one fused
-            # multiply-add (1.25x faster than the product form).
-            for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
-                i = 3 * x
-                z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-                sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
-                sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
-                sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
-            return
-        for x in range(row.size // 3):
+        for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
             i = 3 * x
             z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-            r = np.float32((z0 != code_max) & (z1 != code_max) & (z2 != code_max))
-            sums[i] = _add_reset(sums[i], t0[z0], r)
-            sums[i + 1] = _add_reset(sums[i + 1], t1[z1], r)
-            sums[i + 2] = _add_reset(sums[i + 2], t2[z2], r)
+            sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
+            sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
+            sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
         return
-    for x in range(row.size // channels):
-        keep = np.float32(1.0)
-        if not per_channel:
-            for c in range(channels):
-                keep = keep * np.float32(row[x * channels + c] != code_max)
-        for c in range(channels):
-            i = x * channels + c
-            z = row[i]
-            sums[i] = _add_reset(sums[i], terms[c, z], keep * np.float32(z != code_max))
+    for i in range(row.size):
+        z = row[i]
+        sums[i] = _reset_add(sums[i], np.float32(z != code_max), terms[i % channels, z])
 
 
 @njit(**_KERNEL)
@@ -274,19 +259,19 @@ def _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max,
 
 
 @njit(**_KERNEL)
-def _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel,
+def _accumulate_by_brackets(codes, y, stop, terms, code_max,
                             sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, one look-up per code, longest first."""
     channels = terms.shape[1]
     sums[:] = 0.0
     j = stop - 1
-    if per_channel and channels == 3:
+    if channels == 3:
         while j >= 1:
             _accumulate_two(codes[j, y], codes[j - 1, y], terms[j], terms[j - 1], code_max,
                             sums)
             j -= 2
     while j >= 0:
-        _accumulate(codes[j, y], terms[j], code_max, per_channel, channels, sums)
+        _accumulate(codes[j, y], terms[j], code_max, channels, sums)
         j -= 1
 
 
@@ -333,42 +318,92 @@ def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _fallback(codes, y, x, c, channels, code_max, per_channel,
-              estimates):  # pragma: no cover - compiled
-    """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
-    from (the shortest bracket's if it is saturated even there)."""
-    kept = 0
-    while kept < codes.shape[0]:
-        row = codes[kept, y]
-        saturated = row[x * channels + c] == code_max
-        if not per_channel:
-            for k in range(channels):
-                saturated |= row[x * channels + k] == code_max
-        if saturated:
-            break
-        kept += 1
-    j = kept - 1 if kept > 0 else 0
-    return estimates[j, c, codes[j, y][x * channels + c]]
+def _unsafe(row, x, c, channels, limits, pixel_rule):  # pragma: no cover - compiled
+    """Whether channel ``c`` of pixel ``x`` in ``row`` is dropped: its code at or above
+    its limit, or (``pixel_rule``) any channel's."""
+    if not pixel_rule:
+        return row[x * channels + c] >= limits[c]
+    for k in range(channels):
+        if row[x * channels + k] >= limits[k]:
+            return True
+    return False
 
 
 @njit(**_KERNEL)
-def _clipped_and_black(shortest, longest, code_max, channels):  # pragma: no cover - compiled
-    """Pixels with a channel saturated in ``shortest``; pixels at 0 in all of ``longest``."""
+def _fallback(codes, y, x, c, channels, limits, pixel_rule,
+              estimates):  # pragma: no cover - compiled
+    """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
+    from. Dropped even from the shortest bracket (clipped everywhere): a neutral lower
+    bound, the largest of the shortest bracket's estimates over the pixel's channels
+    (every channel the same, so no colour cast), when the pixel rule dropped it or
+    every channel is clipped; else the channel's own estimate there."""
+    kept = 0
+    while kept < codes.shape[0] and not _unsafe(codes[kept, y], x, c, channels, limits,
+                                                pixel_rule):
+        kept += 1
+    if kept > 0:
+        return estimates[kept - 1, c, codes[kept - 1, y][x * channels + c]]
+    row = codes[0, y]
+    every = True
+    for k in range(channels):
+        every &= row[x * channels + k] >= limits[k]
+    if not (pixel_rule or every):
+        return estimates[0, c, row[x * channels + c]]
+    value = estimates[0, 0, row[x * channels]]
+    for k in range(1, channels):
+        value = max(value, estimates[0, k, row[x * channels + k]])
+    return value
+
+
+@njit(**_KERNEL)
+def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - compiled
+    """``out``: ``row``'s codes with every dropped observation set to ``Z_max`` (a code
+    at or above its channel's limit; with ``pixel_rule`` all of the pixel's channels
+    when any one is), so that the per-channel resets apply the policy."""
+    channels = limits.size
+    top = row.dtype.type(code_max)
+    if channels == 3:
+        l0, l1, l2 = limits[0], limits[1], limits[2]
+        for x in range(row.size // 3):  # written so that it vectorises
+            i = 3 * x
+            z0, z1, z2 = row[i], row[i + 1], row[i + 2]
+            u0, u1, u2 = z0 >= l0, z1 >= l1, z2 >= l2
+            if pixel_rule:
+                u0 = u1 = u2 = u0 | u1 | u2
+            out[i] = top if u0 else z0
+            out[i + 1] = top if u1 else z1
+            out[i + 2] = top if u2 else z2
+        return
+    for x in range(row.size // channels):
+        any_unsafe = False
+        for c in range(channels):
+            any_unsafe |= row[x * channels + c] >= limits[c]
+        for c in range(channels):
+            z = row[x * channels + c]
+            out[x * channels + c] = top if (z >= limits[c] or (pixel_rule and any_unsafe)) \
+                else z
+
+
+@njit(**_KERNEL)
+def _clipped_and_black(shortest, longest, limits, channels):  # pragma: no cover - compiled
+    """Pixels with a channel at or above its limit in ``shortest``; pixels at 0 in all of
+    ``longest``."""
     clipped = 0
     black = 0
     if channels == 3:
+        l0, l1, l2 = limits[0], limits[1], limits[2]
         # Written so that it vectorises (8x faster than a stepped range of booleans).
         for x in range(shortest.size // 3):
             i = 3 * x
-            clipped += np.int32((shortest[i] == code_max) | (shortest[i + 1] == code_max)
-                                | (shortest[i + 2] == code_max))
+            clipped += np.int32((shortest[i] >= l0) | (shortest[i + 1] >= l1)
+                                | (shortest[i + 2] >= l2))
             black += np.int32((longest[i] | longest[i + 1] | longest[i + 2]) == 0)
         return clipped, black
     for x in range(shortest.size // channels):
         any_saturated = False
         all_black = True
         for c in range(channels):
-            any_saturated |= shortest[x * channels + c] == code_max
+            any_saturated |= shortest[x * channels + c] >= limits[c]
             all_black &= longest[x * channels + c] == 0
         clipped += any_saturated
         black += all_black
@@ -388,7 +423,20 @@ def _early_stop(codes, y, code_max, early_stop):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel, log_domain,
+def _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule
+                 ):  # pragma: no cover - compiled
+    """The rows to sum for row ``y``: ``codes`` itself and ``y``, or (when ``remapped``
+    has room) its brackets below ``stop`` remapped by the saturation policy
+    (:func:`_remap_row`) and row 0 of ``remapped``."""
+    if remapped.shape[0] == 0:
+        return codes, y
+    for j in range(stop):
+        _remap_row(codes[j, y], remapped[j, 0], limits, code_max, pixel_rule)
+    return remapped, 0
+
+
+@njit(**_KERNEL)
+def _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
                 out, clipped_rows, black_rows, skipped_rows):  # pragma: no cover - compiled
     """Row ``y``'s result from its sums (the fallback where no weight is left) and its
     statistics."""
@@ -399,48 +447,52 @@ def _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel, l
     if _finish(sums, row, log_domain, scale):
         for i in range(n):
             if sums[i].imag <= 0.0:
-                value = _fallback(codes, y, i // channels, i % channels, channels, code_max,
-                                  per_channel, estimates)
+                value = _fallback(codes, y, i // channels, i % channels, channels, limits,
+                                  pixel_rule, estimates)
                 if log_domain:
                     value = math.exp(min(max(value, LOG_FLOAT32_TINY), LOG_FLOAT32_MAX))
                 row[i] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
     skipped_rows[y] = (count - stop) * (n // channels)
     clipped_rows[y], black_rows[y] = _clipped_and_black(codes[0, y], codes[count - 1, y],
-                                                        code_max, channels)
+                                                        limits, channels)
 
 
 @njit(**_KERNEL)
-def merge_rows_by_pairs(first, last, codes, top, bottom, pairs, estimates, code_max,
-                        log_domain, early_stop, out, clipped_rows, black_rows,
-                        skipped_rows):  # pragma: no cover - compiled
+def merge_rows_by_pairs(first, last, codes, top, pairs, estimates, code_max, limits,
+                        pixel_rule, remap, log_domain, early_stop, out, clipped_rows,
+                        black_rows, skipped_rows):  # pragma: no cover - compiled
     """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s pair-table path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)  # numerator + i denominator
     scale = np.empty(n, np.int32)
     zeros = np.zeros(n, codes.dtype)
+    remapped = np.empty((codes.shape[0] if remap else 0, 1, n), codes.dtype)
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
-        _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max, sums)
-        _finish_row(codes, y, stop, sums, scale, estimates, code_max, True, log_domain, out,
-                    clipped_rows, black_rows, skipped_rows)
+        source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
+        _accumulate_by_pairs(source, row, stop, pairs, zeros, code_max, sums)
+        _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
+                    out, clipped_rows, black_rows, skipped_rows)
 
 
 @njit(**_KERNEL)
-def merge_rows_by_brackets(first, last, codes, top, bottom, terms, estimates, code_max,
-                           per_channel, log_domain, early_stop, out, clipped_rows,
+def merge_rows_by_brackets(first, last, codes, top, terms, estimates, code_max, limits,
+                           pixel_rule, remap, log_domain, early_stop, out, clipped_rows,
                            black_rows, skipped_rows):  # pragma: no cover - compiled
     """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s general path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)
     scale = np.empty(n, np.int32)
+    remapped = np.empty((codes.shape[0] if remap else 0, 1, n), codes.dtype)
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
-        _accumulate_by_brackets(codes, y, stop, terms, code_max, per_channel, sums)
-        _finish_row(codes, y, stop, sums, scale, estimates, code_max, per_channel, log_domain,
+        source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
+        _accumulate_by_brackets(source, row, stop, terms, code_max, sums)
+        _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
                     out, clipped_rows, black_rows, skipped_rows)
 
 
-def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_channel,
+def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, pixel_rule,
                  log_domain, early_stop, out, clipped_rows, black_rows, skipped_rows):
     """Merge rows ``top .. bottom`` of the brackets into ``out`` ``(H, W * C)`` float32.
 
@@ -448,23 +500,29 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, per_chan
     is ``w(z) x_j(z) + i w(z)``, the numerator's and the denominator's term, both 0 at
     ``z = code_max`` (a saturated observation never counts); ``estimates[j, c, z]``
     (float64) is ``x_j(z)`` for the fallback. ``pairs`` is :func:`pair_tables` of the
-    terms (the per-channel policy with three channels of 8-bit codes), or empty for the
-    general path. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
+    terms (three channels of 8-bit codes), or empty for the general path.
+
+    The saturation policy: ``limits`` ``(C,)`` int64, the first code of each channel that
+    is dropped (``code_max`` drops the top code only); ``pixel_rule``: a dropped channel
+    drops the whole observation (every channel of that pixel in that bracket). Unless
+    both are at their plainest (per channel, at ``code_max``), each bracket's row is first
+    remapped (:func:`_remap_row`, into a per-task buffer) so that the per-channel resets
+    apply the policy. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
     reads every bracket of every row (the same result, to float32 rounding). Per row,
-    for the statistics: ``clipped_rows`` (pixels with a channel saturated in the
-    shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
+    for the statistics: ``clipped_rows`` (pixels with a channel at or above its limit in
+    the shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
     and ``skipped_rows`` (pixel-brackets the early stop never read).
 
     The two paths are two serial kernels (each compiles only what it runs, on first
     use) whose rows the threads share in chunks (:func:`hdrio.parallel.on_threads`):
     less to compile than numba's ``parallel=True``, for the same speed.
     """
-    tasks = bottom - top  # rows
+    remap = bool(pixel_rule) or bool(np.any(limits < code_max))
     if pairs.shape[0] == codes.shape[0]:
-        on_threads(merge_rows_by_pairs, tasks, codes, top, bottom, pairs, estimates,
-                   code_max, log_domain, early_stop, out, clipped_rows, black_rows,
-                   skipped_rows)
+        on_threads(merge_rows_by_pairs, bottom - top, codes, top, pairs, estimates,
+                   code_max, limits, pixel_rule, remap, log_domain, early_stop, out,
+                   clipped_rows, black_rows, skipped_rows)
     else:
-        on_threads(merge_rows_by_brackets, tasks, codes, top, bottom, terms, estimates,
-                   code_max, per_channel, log_domain, early_stop, out, clipped_rows,
-                   black_rows, skipped_rows)
+        on_threads(merge_rows_by_brackets, bottom - top, codes, top, terms, estimates,
+                   code_max, limits, pixel_rule, remap, log_domain, early_stop, out,
+                   clipped_rows, black_rows, skipped_rows)

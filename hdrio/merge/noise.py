@@ -48,8 +48,8 @@ import numpy as np
 from scipy.optimize import nnls
 
 from hdrio.io.staging import strided_copy
-from hdrio.merge.debevec1997 import exposure_columns
 from hdrio.response.curve import CameraResponse
+from hdrio.stack import exposure_columns
 
 QUANTISATION = 1.0 / 12.0
 """Variance of rounding to integer codes (code units squared)."""

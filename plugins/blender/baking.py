@@ -104,7 +104,9 @@ class BakedMerge:
         The weighted mean is of ``ln E`` (then exponentiated), else of ``E``.
     per_channel
         Saturation drops a channel on its own (hdrio's ``"channel"`` policy), else the
-        whole pixel (``"pixel"``).
+        whole pixel (``"pixel"``; also ``"auto"`` and ``"safe"``, which the node applies
+        at the top code: it has no stack to find white levels, shoulders or channel
+        mixing in). A pixel clipped in every bracket takes the neutral lower bound.
     code_max
         Saturation code of the brackets (255 or 65535).
     """

@@ -67,7 +67,12 @@ def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedMerge,
                                   f"estimate ({exposure:g} s)")
         saturated = [build.math("GREATER_THAN", codes[c], baked.saturation_level)
                      for c in range(3)]
-        if not baked.per_channel:  # the tutorial's policy: any channel drops the pixel
+        if rank == 0:  # clipped in every bracket: all channels, or any (pixel rule)
+            combine = "MINIMUM" if baked.per_channel else "MAXIMUM"
+            clipped = build.math(combine, build.math(combine, *saturated[:2]), saturated[2])
+            neutral = build.math("MAXIMUM", build.math("MAXIMUM", *estimates[:2]),
+                                 estimates[2])
+        if not baked.per_channel:  # the pixel rule: any channel drops the pixel
             anywhere = build.math("MAXIMUM", build.math("MAXIMUM", *saturated[:2]),
                                   saturated[2])
             saturated = [anywhere] * 3
@@ -93,6 +98,10 @@ def build_merge_graph(tree: bpy.types.NodeTree, baked: BakedMerge,
         weighted = build.math("GREATER_THAN", denominator[c], 0.0)
         merged = build.math("MULTIPLY_ADD", weighted,
                             build.math("SUBTRACT", mean, fallback[c]), fallback[c])
+        # A pixel clipped in every bracket: the neutral lower bound (the largest of the
+        # shortest bracket's estimates), as hdrio's merge kernel.
+        merged = build.math("MULTIPLY_ADD", clipped, build.math("SUBTRACT", neutral, merged),
+                            merged)
         if baked.log_domain:
             merged = build.math("EXPONENT", merged)
         channels.append(build.math("MAXIMUM", merged, FLOAT32_TINY))

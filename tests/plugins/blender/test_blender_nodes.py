@@ -98,8 +98,9 @@ def test_merge_node_matches_hdrio_default_merge(registered, write_brackets, tmp_
     node.set_response(response_to_json(response, "gamma 2.2", noise))
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "node.exr", size)
 
-    # Whatever hdrio merge's defaults are: the node's tables are the core's.
-    options = MergeOptions()
+    # Whatever hdrio merge's defaults are: the node's tables are the core's (its
+    # saturation policy as the node applies it: the pixel rule at the top code).
+    options = MergeOptions(saturation="pixel")
     reference, _ = MERGE_METHODS[options.merge](stack, response, options.weighting,
                                                 options.saturation, noise=noise)
     assert_matches_merge("known response", merged, reference)

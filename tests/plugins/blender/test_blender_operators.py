@@ -59,7 +59,8 @@ def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     assert node.response_json != before
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
 
-    reference = merge_stack(read_brackets(paths), MergeOptions()).radiance
+    # The node applies hdrio's default saturation policy as the pixel rule at the top code.
+    reference = merge_stack(read_brackets(paths), MergeOptions(saturation="pixel")).radiance
     assert_matches_merge("solved", merged, reference)
 
 
@@ -70,7 +71,8 @@ def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tm
     scene = bpy.context.scene
     node = solved_merge_node(clean_compositor(scene), paths)
     assert node.bracket_exposures() == pytest.approx([1 / 8, 1.0, 8.0])  # from EXIF
-    result = merge_stack(read_brackets(paths), MergeOptions())
+    # The node applies hdrio's default saturation policy as the pixel rule at the top code.
+    result = merge_stack(read_brackets(paths), MergeOptions(saturation="pixel"))
     assert not np.all(result.response.supported[1:-1])  # the case this test is about
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
                            result.radiance.shape[:2])
@@ -79,7 +81,8 @@ def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tm
     # The acceptance: against the EXR `hdrio merge` writes with its defaults (half
     # floats, and a power-of-two scale if its range needs one), after one global scale.
     command = tmp_path / "cli.exr"
-    assert hdrio_main(["merge", *map(str, paths), "-o", str(command), "-q"]) == 0
+    assert hdrio_main(["merge", *map(str, paths), "-o", str(command), "-q",
+                       "--saturation", "pixel"]) == 0
     written, _ = read_exr(command)
     written = written[..., :3].astype(np.float64)
     scale = np.median(written / merged)

@@ -1,0 +1,175 @@
+"""Saturation policies on camera-like brackets (raw clipping, white balance, a colour
+matrix after the clip), pixels clipped in every bracket, and the clip mask layer."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hdrio.merge.estimators import MERGE_METHODS
+from hdrio.stack import ExposureStack
+from hdrio.synthetic import gamma_inverse_response, hue_angle_error, render_camera_brackets
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+
+
+def _scene(name: str):
+    from benchmarks.truth.scenes import read_scene
+
+    path = DATA / "openexr_scenes" / f"{name}.exr"
+    if not path.is_file():
+        pytest.skip(f"{path} not found: the camera-like tests read ../shared/data")
+    return read_scene(path, 200)
+
+
+def _hue_p99(scene, policy: str, mixing: bool, mask: np.ndarray, **noise) -> float:
+    from benchmarks.truth.stacks import exposure_ladder
+
+    times = exposure_ladder(scene, 7, 2.0)
+    codes, _ = render_camera_brackets(scene.radiance, times, mixing=mixing, seed=1, **noise)
+    stack = ExposureStack.from_arrays(codes, times, files=[f"f{j}.png" for j in range(7)])
+    response, _ = gamma_inverse_response()
+    radiance, _ = MERGE_METHODS["inverse-variance"](stack, response, saturation=policy)
+    return float(np.percentile(hue_angle_error(radiance, scene.radiance, mask), 99))
+
+
+def _transition(scene, **noise) -> np.ndarray:
+    """Pixels with some but not all raw channels clipped in some bracket, none clipped
+    (in raw or in codes) in the shortest: the clip-transition pixels."""
+    from benchmarks.truth.stacks import exposure_ladder
+
+    times = exposure_ladder(scene, 7, 2.0)
+    codes, clipped = render_camera_brackets(scene.radiance, times, seed=1, **noise)
+    n = clipped.sum(axis=-1)
+    return (np.any((n > 0) & (n < 3), axis=0) & ~np.any(clipped[0], axis=-1)
+            & ~np.any(codes[0] == 255, axis=-1))
+
+
+@pytest.mark.parametrize("name", ["Desk", "StillLife"])
+def test_hue_on_clip_transition_pixels_within_twice_the_unmixed_camera(name):
+    # Without sensor noise (codes' rounding only), so that the hue error is the
+    # saturation policy's bias, not the colour matrix's noise gain (its rows amplify
+    # noise about 2.5x; with noise the safe policy equals the oracle that drops exactly
+    # the raw-clipped observations, see the next test). Measured at 200 px: Desk 1.9 vs
+    # 1.7 deg, StillLife 0.6 vs 0.5; the per-channel policy ~100 deg.
+    scene = _scene(name)
+    quiet = {"shot_noise": 0.0, "read_noise": 0.0}
+    mask = _transition(scene, **quiet)
+    assert np.count_nonzero(mask) > 1000
+    control = _hue_p99(scene, "channel", False, mask, **quiet)
+    # "auto" sees the mixing on Desk; on StillLife at 200 px its mixing test finds too
+    # few partly clipped observations and keeps channels apart (a known limit: the
+    # default is not hue-true there; "safe" is).
+    for policy in ("safe", "auto") if name == "Desk" else ("safe",):
+        assert _hue_p99(scene, policy, True, mask, **quiet) <= 2 * control
+    assert _hue_p99(scene, "channel", True, mask, **quiet) > 10 * control
+
+
+def test_safe_policy_matches_the_raw_clip_oracle_with_noise():
+    from benchmarks.truth.stacks import exposure_ladder
+
+    scene = _scene("Desk")
+    times = exposure_ladder(scene, 7, 2.0)
+    codes, clipped = render_camera_brackets(scene.radiance, times, seed=1)
+    mask = _transition(scene)
+    response, _ = gamma_inverse_response()
+    oracle = codes.copy()
+    oracle[np.any(clipped, axis=-1)] = 255  # drop exactly the raw-clipped observations
+    results = {}
+    for label, c, policy in (("safe", codes, "safe"), ("oracle", oracle, "channel"),
+                             ("channel", codes, "channel")):
+        stack = ExposureStack.from_arrays(c, times, files=[f"f{j}.png" for j in range(7)])
+        radiance, _ = MERGE_METHODS["inverse-variance"](stack, response, saturation=policy)
+        results[label] = np.percentile(hue_angle_error(radiance, scene.radiance, mask), 99)
+    # 10 % of the oracle: the policy may drop a few more observations near the shoulder.
+    assert results["safe"] <= 1.1 * results["oracle"]
+    assert results["channel"] > 3 * results["oracle"]
+
+
+def test_auto_keeps_channels_apart_on_an_unmixed_camera():
+    from benchmarks.truth.stacks import exposure_ladder
+    from hdrio.merge.noise import NoiseModel
+    from hdrio.merge.saturation import policy_limits
+
+    scene = _scene("Desk")
+    times = exposure_ladder(scene, 7, 2.0)
+    response, _ = gamma_inverse_response()
+    rules = []
+    for mixing in (True, False):
+        codes, _ = render_camera_brackets(scene.radiance, times, mixing=mixing, seed=1)
+        _, pixel_rule = policy_limits("auto", codes, response,
+                                      NoiseModel.quantisation_only(3), times)
+        rules.append(pixel_rule)
+    assert rules == [True, False]
+
+
+def test_white_level_below_the_top_code_is_found():
+    from hdrio.merge.saturation import white_levels
+
+    rng = np.random.default_rng(0)
+    grid = rng.integers(0, 240, (3, 5000, 3)).astype(np.uint8)
+    grid[:, :800, 2] = 231  # blue piles up at 231: its white level
+    levels = white_levels(grid, 255)
+    assert levels[2] == 231 and levels[0] == 255 and levels[1] == 255
+
+
+def _frobisher() -> list[Path]:
+    folder = DATA / "frobisher_001"
+    files = sorted(folder.glob("IMG_26*.jpg"))
+    if len(files) != 3:
+        pytest.skip(f"{folder} not found: frobisher_001 is read from ../shared/data")
+    return files
+
+
+def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
+    from hdrio.cms.checks import check_exr
+    from hdrio.io.header import read_header
+    from hdrio.pipeline import MergeOptions, merge_files
+
+    output = tmp_path / "f.exr"
+    result = merge_files(_frobisher(), output, options=MergeOptions(clip_mask=True),
+                         pixel_type="float")
+    import OpenImageIO as oiio
+
+    buffer = oiio.ImageBuf(str(output))
+    names = list(buffer.spec().channelnames)
+    assert names == ["R", "G", "B", "clipped.Y"]
+    pixels = buffer.get_pixels(oiio.FLOAT)
+    mask = pixels[..., 3] > 0.5
+    fraction = result.statistics.clipped_everywhere / result.statistics.pixels
+    assert np.count_nonzero(mask) == result.statistics.clipped_everywhere > 0
+    rgb = pixels[..., :3][mask].astype(np.float64)
+    # Neutral: channel ratios equal to the working white (1, 1, 1) within 2 % (they are
+    # equal by construction; main gave 42.1, 47.8, 54.2).
+    ratios = rgb / rgb.mean(axis=-1, keepdims=True)
+    assert np.max(np.abs(ratios - 1.0)) <= 0.02
+    header = read_header(output)
+    assert "clipped" in str(header["hdrio:clipMask"])
+    assert float(header["hdrio:clippedFraction"]) == pytest.approx(fraction)
+    report = check_exr(output)
+    assert report.clipped_fraction == pytest.approx(fraction)
+
+
+def test_clip_mask_round_trip_and_check_summary(tmp_path):
+    import OpenImageIO as oiio
+
+    from hdrio.cms.checks import check_exr, format_report
+    from hdrio.demo import write_demo_brackets
+    from hdrio.merge.debevec1997 import clipped_everywhere_mask
+    from hdrio.pipeline import MergeOptions, merge_files
+
+    _, files = write_demo_brackets(tmp_path)
+    output = tmp_path / "demo.exr"
+    result = merge_files(files[:3], output, options=MergeOptions(clip_mask=True))
+    expected = clipped_everywhere_mask(result.stack.codes[0], result.statistics.limits)
+    assert 0 < expected.sum() < expected.size  # the sun glint and sky: clipped at 1 s
+    layer = oiio.ImageBuf(str(output)).get_pixels(oiio.FLOAT)[..., 3]
+    np.testing.assert_array_equal(layer, expected)  # 0 and 1 are exact in half
+    report = check_exr(output)
+    assert report.clipped_fraction == pytest.approx(expected.mean())
+    assert f"clipped:      {100 * expected.mean():.2f} %" in format_report(report)
+    without = merge_files(files[:3], tmp_path / "plain.exr")
+    assert without.options.clip_mask is False
+    assert oiio.ImageBuf(str(tmp_path / "plain.exr")).spec().nchannels == 3
