@@ -19,6 +19,7 @@ from numba import njit
 
 from hdrio.align.pyramid import base_factor
 from hdrio.align.registration import unusable
+from hdrio.io.staging import release
 from hdrio.skips import well_exposed_codes
 
 STRIDE = 4
@@ -94,7 +95,11 @@ def usable_masks(codes: np.ndarray, code_max: int) -> list[np.ndarray]:
     :func:`hdrio.align.registration.reference_bracket` scores on)."""
     height, width = codes.shape[1:3]
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
-    return [usable(codes[j], code_max, stride) for j in range(codes.shape[0])]
+    masks = []
+    for j in range(codes.shape[0]):
+        masks.append(usable(codes[j], code_max, stride))
+        release(codes, j)  # a staged bracket's pages: a sparse grid maps most of them
+    return masks
 
 
 def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int,
@@ -114,12 +119,14 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     count, height, width, _ = codes.shape
     low, high = well_exposed_codes(code_max)
     ys, xs = _points(codes[reference], linear[reference])
+    release(codes, reference)
     n = ys.size
     reads = {}
     for j in range(count):  # (refused brackets are read too: a few hundred kB)
         values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
         _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
               good)
+        release(codes, j)
         reads[j] = (values, gx, gy, good)
     half = max(height, width) / 2.0
     u = (xs - (width - 1) / 2.0) / half

@@ -44,7 +44,10 @@ def codes_buffer(shape: tuple[int, ...], dtype, budget: int | None = None) -> np
     with tempfile.TemporaryFile(prefix="hdrio-codes-", dir=folder) as backing:
         backing.truncate(size)
         # The mapping keeps the (already unlinked) file alive after it is closed here.
-        return np.memmap(backing, dtype=dtype, mode="r+", shape=shape)
+        staged = np.memmap(backing, dtype=dtype, mode="r+", shape=shape)
+        if hasattr(mmap, "MADV_RANDOM"):  # a sparse read maps its pages, not their folios
+            staged._mmap.madvise(mmap.MADV_RANDOM)
+        return staged
 
 
 def is_staged(codes: np.ndarray) -> bool:

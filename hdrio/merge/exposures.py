@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.io.staging import strided_copy
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -58,7 +59,7 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
     """
     count, height, width, channels = codes.shape
     stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
-    sample = np.asarray(codes[:, ::stride, ::stride]).reshape(count, -1, channels)
+    sample = strided_copy(codes, stride).reshape(count, -1, channels)  # staged: paged out
     code_max = response.code_max
     low, high = (fraction * code_max for fraction in WELL_EXPOSED_CODES)
     columns = np.arange(channels)
