@@ -4,21 +4,18 @@ Kernels compile on first use and are cached on disk (``cache=True``); a later pr
 loads them in milliseconds. The first run of a job can spend most of its time compiling,
 so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
-(:func:`compile_ahead`) that compile the kernels the job needs later (the merge's, the
-preview's tone mapping, the report's check) while this one reads the brackets and solves
-the response; it waits for them before those stages and then loads those kernels from
-the cache.
+(:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile the kernels the
+job needs later (the merge's, the preview's tone mapping, the report's check) while this
+one reads the brackets and solves the response; it waits for them before those stages
+and then loads those kernels from the cache.
 """
 
 from __future__ import annotations
 
 import importlib
-import os
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
-
-import numpy as np
+from collections.abc import Callable
 
 STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
@@ -58,50 +55,28 @@ def announce(say: Callable[[str], None], stage: str) -> None:
             "cache")
 
 
-def _compile_merge() -> None:
-    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's)."""
-    from hdrio.merge.debevec1997 import merge_brackets
-    from hdrio.stack import ExposureStack
-    from hdrio.synthetic import gamma_inverse_response
-
-    codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
-    stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
-    merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
-
-
-def _compile_preview(operator: str) -> None:
-    from hdrio.pipeline import render_preview
-
-    render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
-
-
-def _compile_check() -> None:
-    from hdrio.cms.checks import StreamingCheck
-
-    StreamingCheck().add(np.full((2, 2, 3), 0.5, np.float16))
-
-
 _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
 
 
-def compile_ahead(preview: str | None, check: bool, merge: bool) -> None:
-    """On a first run, start processes compiling kernels into the disk cache: the merge
-    kernel of 8-bit RGB brackets when ``merge``; the ``preview`` operator's (a
-    ``TONEMAP_METHODS`` name, or None) and the check's (when ``check``). Nothing when
-    they are cached already or this process may use one CPU only. :func:`announce` of a
-    stage waits for its process first."""
+def compile_ahead(preview: str | None, check: bool, merge: Callable[[], bool]) -> None:
+    """On a first run, start processes (:mod:`hdrio.precompile`) compiling kernels into
+    the disk cache: the merge kernel of 8-bit RGB brackets when ``merge()`` (asked only
+    when that kernel is not cached); the ``preview`` operator's (a ``TONEMAP_METHODS``
+    name, or None) and the check's (when ``check``). Nothing when they are cached already
+    or this process may use one CPU only. :func:`announce` of a stage waits for its
+    process first."""
     from hdrio.parallel import threads
 
     if threads() < 2:
         return
-    jobs = {("merge",): ["merge"] if merge and not is_stage_cached("merge") else [],
+    jobs = {("merge",): ["merge"] if not is_stage_cached("merge") and merge() else [],
             ("preview", "check"): (
                 [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])
             + (["check"] if check and not is_stage_cached("check") else [])}
     for stages, names in jobs.items():
         if names:
-            process = subprocess.Popen([sys.executable, "-m", "hdrio.jit", *names],
+            process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile", *names],
                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                        stderr=subprocess.DEVNULL)
             _pending.update(dict.fromkeys(stages, process))
@@ -118,24 +93,3 @@ def _wait_for(stage: str) -> None:
 def is_stage_cached(stage: str) -> bool:
     """True when every kernel standing for ``stage`` (a key of :data:`STAGES`) is cached."""
     return all(is_cached(_dispatcher(name)) for name in STAGES[stage])
-
-
-def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.jit merge preview=OPERATOR check``: compile those kernels (and
-    stop when the process that started this one stops)."""
-    from hdrio.parallel import die_with_parent
-
-    die_with_parent(os.getppid())
-    for stage in argv:
-        name, _, value = stage.partition("=")
-        if name == "merge":
-            _compile_merge()
-        elif name == "preview":
-            _compile_preview(value)
-        elif name == "check":
-            _compile_check()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

@@ -608,7 +608,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                   and not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"))
     if compile_ahead:
         jit.compile_ahead(tonemap if tonemapped else None, observe is not None,
-                          merge=_eight_bit_rgb(paths))
+                          merge=lambda: _eight_bit_rgb(paths))
     result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
                          options=options, progress=progress, read_progress=read_progress)
     if observe is not None:

@@ -24,7 +24,7 @@ def test_compile_ahead_fills_the_cache_the_job_reads(tmp_path):
     cache = str(tmp_path / "numba-cache")
     stages = ["merge", "preview", "check"]
     assert _run(["-c", _CACHED, *stages], cache) == "merge=False preview=False check=False"
-    _run(["-m", "hdrio.jit", "merge", "preview=reinhard-global", "check"], cache)
+    _run(["-m", "hdrio.precompile", "merge", "preview=reinhard-global", "check"], cache)
     # A new process finds every kernel of those stages in the cache: the job's merge,
     # preview and report load them instead of compiling.
     assert _run(["-c", _CACHED, *stages], cache) == "merge=True preview=True check=True"

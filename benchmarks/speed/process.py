@@ -7,8 +7,9 @@ The I/O floor is a process too: a plain OpenImageIO script that decodes the same
 and writes one half ZIP EXR, timed in the same run. It writes the very pixels hdrio wrote
 (loaded from a ``.npy`` file), since what an EXR costs to compress depends on what is in
 it; the older floor, which wrote the JPEG values (256 levels) instead, is still reported
-beside it, labelled (measured here, the two take about the same time). CPU seconds (user + system, all threads)
-are recorded too: on a shared machine they move less than wall time.
+beside it, labelled (measured here, the two take about the same time). CPU seconds
+(user + system, all threads) are recorded too: on a shared machine they move less than
+wall time.
 """
 
 from __future__ import annotations
@@ -92,8 +93,8 @@ def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 
         paths = [str(p) for p in write_jpegs(ladder, folder)]
         exposures = [repr(float(t)) for t in ladder.exposures]
         ladder = None
-        merged = _median([*hdrio, "merge", *paths[1:8], "--exposures",
-                          ",".join(exposures[1:8]), "-o", str(folder / "merge7.exr"), "-q"], 1)
+        _median([*hdrio, "merge", *paths[1:8], "--exposures", ",".join(exposures[1:8]),
+                 "-o", str(folder / "merge7.exr"), "-q"], 1)
         written = folder / "written.npy"  # what hdrio wrote: the floor writes the same
         np.save(written, read_image(folder / "merge7.exr")[0].astype(np.float16))
         for count in counts:
@@ -117,7 +118,6 @@ def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 
                      "values, not hdrio's pixels)", "seconds": jpeg_floor["seconds"],
                      "cpu_seconds": jpeg_floor["cpu_seconds"],
                      "process_peak_mb": jpeg_floor["peak_mb"]})
-        del merged
         check = _median([*hdrio, "check", str(folder / "merge7.exr")], repeats)
         rows.append({"row": "process", "method": f"hdrio check of the {width}x{height} half "
                      "EXR", "seconds": check["seconds"], "cpu_seconds": check["cpu_seconds"],

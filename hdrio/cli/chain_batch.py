@@ -61,33 +61,39 @@ def _setting(key: str):
     return run
 
 
-operation("--force", per_set=False, help="with --group: run every set, even those whose "
-          "outputs are recorded as made from the same inputs and settings",
-          example="shoot/ --group --force --merge -o {first_stem}.exr")(_setting("force"))
-operation("--group-size", "N", convert=_positive_int, per_set=False,
-          help="with --group: every N frames in capture order are one set (a fixed bracket "
-               "count), instead of splitting on time gaps and repeated exposures",
-          example="shoot/ --group-size 7 --group --merge -o {first_stem}.exr"
-          )(_setting("group_size"))
-operation("--group-gap", "SECONDS", convert=_seconds, per_set=False,
-          help="with --group: a pause longer than this after a frame ends starts a new set "
-               "(default 2)", example="shoot/ --group-gap 5 --group --merge -o {index}.exr"
-          )(_setting("group_gap"))
-operation("--shard", "K/N", convert=_shard, per_set=False,
-          help="with --group: run only the K-th of N equal, fixed parts of the sets (one "
-               "farm task each; together the N tasks cover every set once)",
-          example="shoot/ --shard 3/10 --group --merge -o {first_stem}.exr"
-          )(_setting("shard"))
-operation("--list-sets", per_set=False,
-          help="with --group: print the sets as JSON (files, exposure times, outputs, "
-               "fingerprint, status run/done/skip) and do nothing else",
-          example="shoot/ --list-sets --group --merge -o {first_stem}.exr"
-          )(_setting("list_sets"))
-operation("--dask", "ADDRESS", convert=_dask_address, per_set=False,
-          help="with --group: run the sets on a Dask cluster: a scheduler address "
-               "(tcp://host:8786) or local[:N] (N worker processes here); the farm extra",
-          example="shoot/ --dask local:2 --group --merge -o {first_stem}.exr"
-          )(_setting("dask"))
+def _batch_setting(name: str, *arguments: str, **declaration: Any) -> None:
+    """Register ``name`` as a batch setting (the whole run's, not a set's), stored in
+    ``chain.settings`` under ``name`` without its dashes (``--group-size``:
+    ``group_size``)."""
+    operation(name, *arguments, per_set=False, **declaration)(
+        _setting(name.removeprefix("--").replace("-", "_")))
+
+
+_batch_setting("--force", help="with --group: run every set, even those whose outputs are "
+               "recorded as made from the same inputs and settings",
+               example="shoot/ --group --force --merge -o {first_stem}.exr")
+_batch_setting("--group-size", "N", convert=_positive_int,
+               help="with --group: every N frames in capture order are one set (a fixed "
+                    "bracket count), instead of splitting on time gaps and repeated "
+                    "exposures",
+               example="shoot/ --group-size 7 --group --merge -o {first_stem}.exr")
+_batch_setting("--group-gap", "SECONDS", convert=_seconds,
+               help="with --group: a pause longer than this after a frame ends starts a new "
+                    "set (default 2)",
+               example="shoot/ --group-gap 5 --group --merge -o {index}.exr")
+_batch_setting("--shard", "K/N", convert=_shard,
+               help="with --group: run only the K-th of N equal, fixed parts of the sets "
+                    "(one farm task each; together the N tasks cover every set once)",
+               example="shoot/ --shard 3/10 --group --merge -o {first_stem}.exr")
+_batch_setting("--list-sets",
+               help="with --group: print the sets as JSON (files, exposure times, outputs, "
+                    "fingerprint, status run/done/skip) and do nothing else",
+               example="shoot/ --list-sets --group --merge -o {first_stem}.exr")
+_batch_setting("--dask", "ADDRESS", convert=_dask_address,
+               help="with --group: run the sets on a Dask cluster: a scheduler address "
+                    "(tcp://host:8786) or local[:N] (N worker processes here); the farm "
+                    "extra",
+               example="shoot/ --dask local:2 --group --merge -o {first_stem}.exr")
 
 
 def check_batch_options(steps: list[Step]) -> None:

@@ -190,7 +190,9 @@ class StreamingCheck:
         self.units, self.clipped_fraction, self.gamut = units, clipped_fraction, gamut
         self.masked_fraction = masked_fraction
         self._weights = normalised_primary_matrix(self.chromaticities)[1].astype(np.float32)
-        self._to_gamut = _gamut_matrix(self.chromaticities, gamut)
+        to_gamut = _gamut_matrix(self.chromaticities, gamut)
+        self._use_gamut = to_gamut is not None
+        self._to_gamut = (np.eye(3) if to_gamut is None else to_gamut).astype(np.float32)
         self._counts = np.zeros(_BINS, dtype=np.int64)
         self.pixels = self.negative = self.non_finite = self.outside = 0
         self._low, self._high = np.inf, 0.0
@@ -222,13 +224,11 @@ class StreamingCheck:
             rows = rows.astype(np.float32)
         rows = np.ascontiguousarray(rows).reshape(-1, rows.shape[-1])
         extremes = np.array([np.inf, 0.0], np.float32)
-        use_gamut = self._to_gamut is not None
-        to_gamut = (self._to_gamut if use_gamut else np.eye(3)).astype(np.float32)
         half = rows.dtype == np.float16
         bad, negative, outside = check_kernel.count_rows(
             rows.view(np.uint16) if half else rows,
-            check_kernel.HALF_TABLE, self._weights, to_gamut,
-            use_gamut, self._counts, _BIN_SHIFT, extremes)
+            check_kernel.HALF_TABLE, self._weights, self._to_gamut,
+            self._use_gamut, self._counts, _BIN_SHIFT, extremes)
         self.pixels += rows.shape[0]
         self.non_finite += int(bad)
         self.negative += int(negative)

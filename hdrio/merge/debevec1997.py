@@ -42,14 +42,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from hdrio.io.staging import is_staged, release
 from hdrio.merge.kernel import MAX_BRACKETS, PAIR_LEVELS, merge_kernel, pair_tables
 from hdrio.merge.saturation import SATURATION_POLICIES
 from hdrio.merge.weighting import weights_table
-from hdrio.parallel import threads
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack, exposure_columns
 
@@ -148,8 +146,6 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     terms = terms.astype(np.complex64)
     radiance = np.empty((height, width, channels), dtype=np.float32)
     counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
-    # The same thread count as every other kernel (HDRIO_THREADS, else the CPUs we have).
-    numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
     codes = stack.codes.reshape(count, height, width * channels)  # a view (contiguous)
     band = MERGE_BAND_ROWS if is_staged(stack.codes) else height
     for top in range(0, height, band):

@@ -1,0 +1,56 @@
+"""``python -m hdrio.precompile STAGE ...``: compile a job's kernels into numba's disk
+cache in a process of their own, started by :func:`hdrio.jit.compile_ahead` on a first
+run. Each stage runs hdrio's own entry point on a tiny input, so the kernels compile for
+the very types the job passes them. Nothing imports this module."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from hdrio.parallel import die_with_parent
+
+
+def _compile_merge() -> None:
+    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's)."""
+    from hdrio.merge.debevec1997 import merge_brackets
+    from hdrio.stack import ExposureStack
+    from hdrio.synthetic import gamma_inverse_response
+
+    codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
+    stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
+    merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
+
+
+def _compile_preview(operator: str) -> None:
+    from hdrio.pipeline import render_preview
+
+    render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
+
+
+def _compile_check() -> None:
+    from hdrio.cms.checks import StreamingCheck
+
+    StreamingCheck().add(np.full((2, 2, 3), 0.5, np.float16))
+
+
+def main(argv: Sequence[str]) -> int:
+    """``python -m hdrio.precompile merge preview=OPERATOR check``: compile those kernels
+    (and stop when the process that started this one stops)."""
+    die_with_parent(os.getppid())
+    for stage in argv:
+        name, _, value = stage.partition("=")
+        if name == "merge":
+            _compile_merge()
+        elif name == "preview":
+            _compile_preview(value)
+        elif name == "check":
+            _compile_check()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
