@@ -173,3 +173,20 @@ def test_dask_addresses():
     for text in ("local:0", "local:x", "farm"):
         with pytest.raises(ValueError, match="local:N|scheduler address"):
             parse_address(text)
+
+
+def test_local_workers_keep_glibc_malloc_tuning(client):
+    """distributed exports ``MALLOC_TRIM_THRESHOLD_=65536`` to its workers, which turns
+    off glibc's adaptive mmap threshold (10x the page faults, 1.4x the CPU of a set in
+    ``benchmarks/farm``); hdrio's local cluster passes on only what the user exported.
+    Each worker gets its share of the kernel threads."""
+    from hdrio.batch.pool import worker_threads
+
+    def environment():
+        return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("HDRIO_THREADS")
+
+    seen = client.run(environment)
+    assert len(seen) == 2
+    for trim, threads in seen.values():
+        assert trim == os.environ.get("MALLOC_TRIM_THRESHOLD_")
+        assert threads == str(worker_threads(2))
