@@ -20,8 +20,9 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
                     saturation="channel", limits=None):
     """Radiance ``(H, W, C)`` float32 and ``(clipped, black)`` pixel counts.
 
-    ``limits`` ``(C,)``: the first dropped code per channel (``safe``; ``Z_max`` else)."""
-    if saturation != "safe" or limits is None:
+    ``limits`` ``(C,)``: the first dropped code per channel (``safe``, and ``auto`` where
+    it chose per-channel limits: each channel dropped alone; ``Z_max`` else)."""
+    if saturation not in ("safe", "auto") or limits is None:
         limits = np.full(stack.codes.shape[-1], stack.code_max)
     count, height, width, channels = stack.codes.shape
     weights = weights_table(weighting, stack.code_max)[:, None] * response.supported
@@ -34,7 +35,7 @@ def merge_reference(stack, response, weighting="Debevec1997", domain="log",
     for j in range(count):
         codes = stack.codes[j].astype(np.int64)
         saturated = codes >= limits
-        if saturation != "channel":
+        if saturation not in ("channel", "auto"):
             saturated = np.repeat(np.any(saturated, axis=-1, keepdims=True), channels, -1)
         dropped |= saturated
         keep = ~dropped

@@ -139,8 +139,10 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
         limits = np.full(channels, stack.code_max)
     limits = np.ascontiguousarray(np.clip(limits, 1, stack.code_max), dtype=np.int64)
     pixel_rule = saturation in ("pixel", "safe") or (saturation == "auto" and pixel_rule)
+    for c, limit in enumerate(limits):  # a dropped code never counts (the kernel's resets)
+        terms[:, c, limit:] = 0.0
     if channels == 3 and stack.code_max < PAIR_LEVELS:
-        pairs = pair_tables(terms, stack.code_max)
+        pairs = pair_tables(terms, limits)
     else:
         pairs = np.empty((0, channels, 1), np.complex64)  # the general path
     terms = terms.astype(np.complex64)

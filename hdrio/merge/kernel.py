@@ -12,20 +12,22 @@ denominator``, and so do the tables' terms ``w(z) x_j(z) + i w(z)``: one 8-byte 
 store for both (1.13x faster than two float32 arrays, which also left the compiler
 short of registers).
 
-Saturation (a code at ``Z_max``) drops the observation from its bracket and from every
-longer one. The kernel walks the brackets longest first and *resets* a channel's sums
-where it meets a saturated code: ``sum = (sum + term[z]) * (z != Z_max)``. What
-survives is exactly the sum over the brackets shorter than the first saturated one, with
-no per-channel state to load and store and no data-dependent branch (on this machine
-1.3x faster than carrying an "alive" flag). With the terms 0 at ``Z_max`` that is
-``sum * (z != Z_max) + term[z]``, a fused multiply-add.
+Saturation (a code at or above its channel's *limit*: ``Z_max``, or lower where
+:mod:`hdrio.merge.saturation` found the white level or its shoulder below it) drops the
+observation from its bracket and from every longer one. The kernel walks the brackets
+longest first and *resets* a channel's sums where it meets a dropped code: ``sum = (sum
++ term[z]) * (z < limit)``. What survives is exactly the sum over the brackets shorter
+than the first dropped one, with no per-channel state to load and store and no
+data-dependent branch (on this machine 1.3x faster than carrying an "alive" flag). With
+the terms 0 from the limit up that is ``sum * (z < limit) + term[z]``, a fused
+multiply-add; a limit below ``Z_max`` costs nothing more than ``Z_max`` itself.
 
-**Saturation policies** (:mod:`hdrio.merge.saturation`) other than "a channel at
-``Z_max`` alone" are applied by remapping each bracket's row before it is summed, into a
-per-task buffer: a code at or above its channel's limit becomes ``Z_max``, and with the
-pixel rule so do all of that pixel's codes in that bracket. The per-channel resets then
-apply the policy, through the same pair tables (the tutorial's per-pixel policy used to
-take one look-up per code instead). ``benchmarks/speed`` times the remap.
+**The pixel rule** (any dropped channel drops the whole observation: the tutorial's
+``pixel`` and the ``safe`` policy) is applied by remapping each bracket's row before it
+is summed, into a per-task buffer: every code of a pixel with a dropped channel becomes
+``Z_max``. The per-channel resets then apply it, through the same pair tables (the
+tutorial's per-pixel policy used to take one look-up per code instead).
+``benchmarks/speed`` times the remap.
 
 **Pair tables (8-bit codes, three channels: the common case).** The
 kernel is bound by its scalar table look-ups, about ten instructions per code value
@@ -135,112 +137,119 @@ def _reset_add(total, keep, term):  # pragma: no cover - compiled
 
 
 @njit(**_KERNEL)
-def _accumulate(row, terms, code_max, channels, sums):  # pragma: no cover - compiled
-    """``sum = sum * (z != Z_max) + term[z]`` over one bracket's row (the terms are 0 at
-    ``Z_max``, so this is ``(sum + term) * (z != Z_max)``: one fused multiply-add, 1.25x
-    faster than the product form)."""
+def _accumulate(row, terms, limits, channels, sums):  # pragma: no cover - compiled
+    """``sum = sum * (z < limit) + term[z]`` over one bracket's row (the terms are 0 from
+    the channel's limit up, so this is ``(sum + term) * (z < limit)``: one fused
+    multiply-add, 1.25x faster than the product form)."""
     if channels == 3:
         t0, t1, t2 = terms[0], terms[1], terms[2]
+        l0, l1, l2 = limits[0], limits[1], limits[2]
         for x in range(row.size // 3):  # not range(0, row.size, 3): 1.4x slower
             i = 3 * x
             z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-            sums[i] = _reset_add(sums[i], np.float32(z0 != code_max), t0[z0])
-            sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 != code_max), t1[z1])
-            sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 != code_max), t2[z2])
+            sums[i] = _reset_add(sums[i], np.float32(z0 < l0), t0[z0])
+            sums[i + 1] = _reset_add(sums[i + 1], np.float32(z1 < l1), t1[z1])
+            sums[i + 2] = _reset_add(sums[i + 2], np.float32(z2 < l2), t2[z2])
         return
     for i in range(row.size):
         z = row[i]
-        sums[i] = _reset_add(sums[i], np.float32(z != code_max), terms[i % channels, z])
+        sums[i] = _reset_add(sums[i], np.float32(z < limits[i % channels]),
+                             terms[i % channels, z])
 
 
 @njit(**_KERNEL)
-def _accumulate_two(longer, shorter, terms_longer, terms_shorter, code_max,
+def _accumulate_two(longer, shorter, terms_longer, terms_shorter, limits,
                     sums):  # pragma: no cover - compiled
     """Two brackets at once, per-channel policy, three channels: half the loads and
     stores of the sums that two :func:`_accumulate` calls make (1.13x faster)."""
     a0, a1, a2 = terms_longer[0], terms_longer[1], terms_longer[2]
     b0, b1, b2 = terms_shorter[0], terms_shorter[1], terms_shorter[2]
+    l0, l1, l2 = limits[0], limits[1], limits[2]
     for x in range(longer.size // 3):
         i = 3 * x
         z0, z1, z2 = longer[i], longer[i + 1], longer[i + 2]
         y0, y1, y2 = shorter[i], shorter[i + 1], shorter[i + 2]
-        sums[i] = _reset_add(_reset_add(sums[i], np.float32(z0 != code_max), a0[z0]),
-                             np.float32(y0 != code_max), b0[y0])
+        sums[i] = _reset_add(_reset_add(sums[i], np.float32(z0 < l0), a0[z0]),
+                             np.float32(y0 < l0), b0[y0])
         sums[i + 1] = _reset_add(
-            _reset_add(sums[i + 1], np.float32(z1 != code_max), a1[z1]),
-            np.float32(y1 != code_max), b1[y1])
+            _reset_add(sums[i + 1], np.float32(z1 < l1), a1[z1]),
+            np.float32(y1 < l1), b1[y1])
         sums[i + 2] = _reset_add(
-            _reset_add(sums[i + 2], np.float32(z2 != code_max), a2[z2]),
-            np.float32(y2 != code_max), b2[y2])
+            _reset_add(sums[i + 2], np.float32(z2 < l2), a2[z2]),
+            np.float32(y2 < l2), b2[y2])
 
 
-def pair_tables(terms: np.ndarray, code_max: int) -> np.ndarray:
+def pair_tables(terms: np.ndarray, limits: np.ndarray) -> np.ndarray:
     """The pair tables of three-channel codes below :data:`PAIR_LEVELS` levels, complex64
     ``(P, 3, 256 * 256)``: entry ``z * 256 + y`` of table ``j`` holds the terms of bracket
-    ``j`` at code ``z`` and bracket ``j - 1`` at code ``y``, ``t_j(z) (y != Z_max) +
+    ``j`` at code ``z`` and bracket ``j - 1`` at code ``y``, ``t_j(z) (y < limit) +
     t_{j-1}(y)``. Table 0 pairs the shortest bracket with a row of code 0 (no term of
     its own).
 
-    ``terms`` are :func:`merge_kernel`'s, complex128 here: the sums are formed in float64,
-    then rounded once. (NumPy, not a kernel: a few milliseconds, and nothing to compile.)
+    ``terms`` are :func:`merge_kernel`'s (0 from each channel's entry of ``limits`` up),
+    complex128 here: the sums are formed in float64, then rounded once. (NumPy, not a
+    kernel: a few milliseconds, and nothing to compile.)
     """
     terms = np.asarray(terms, dtype=np.complex128)
     count, channels, levels = terms.shape
     tables = np.zeros((count, channels, PAIR_LEVELS, PAIR_LEVELS), np.complex64)
-    tables[0, :, :levels, 0] = terms[0] * (code_max != 0)
+    tables[0, :, :levels, 0] = terms[0] * (np.asarray(limits) > 0)[:, None]
     if count > 1:
-        keep = np.arange(levels) != code_max  # bracket j's term counts unless y saturated
-        tables[1:, :, :levels, :levels] = (terms[1:, :, :, None] * keep
+        # Bracket j's term counts unless the shorter bracket's code y is dropped.
+        keep = np.arange(levels)[None, :] < np.asarray(limits)[:, None]  # (C, levels)
+        tables[1:, :, :levels, :levels] = (terms[1:, :, :, None] * keep[None, :, None, :]
                                            + terms[:-1, :, None, :])
     return tables.reshape(count, channels, PAIR_LEVELS * PAIR_LEVELS)
 
 
 @njit(**_KERNEL)
-def _pair_term(total, i, longer, shorter, table, code_max, fresh):  # pragma: no cover
+def _pair_term(total, i, longer, shorter, table, limit, fresh):  # pragma: no cover
     """``total`` after the pair's codes at ``i``: ``T[z, y]`` added to it (reset where
-    ``z`` or ``y`` is ``Z_max``), or ``T[z, y]`` alone for the row's first pair
-    (``fresh``)."""
+    ``z`` or ``y`` is at or above the channel's ``limit``), or ``T[z, y]`` alone for the
+    row's first pair (``fresh``)."""
     z = np.int32(longer[i])
     y = np.int32(shorter[i])
     term = table[z * PAIR_LEVELS + y]
     if fresh:
         return term
-    return _reset_add(total, np.float32((z != code_max) & (y != code_max)), term)
+    return _reset_add(total, np.float32((z < limit) & (y < limit)), term)
 
 
 @njit(**_KERNEL)
-def _add_pair(longer, shorter, table, code_max, sums, fresh):  # pragma: no cover
+def _add_pair(longer, shorter, table, limits, sums, fresh):  # pragma: no cover
     """One pair of brackets over a row (three channels)."""
     t0, t1, t2 = table[0], table[1], table[2]
+    l0, l1, l2 = np.int32(limits[0]), np.int32(limits[1]), np.int32(limits[2])
     for x in range(longer.size // 3):
         i = 3 * x
-        sums[i] = _pair_term(sums[i], i, longer, shorter, t0, code_max, fresh)
-        sums[i + 1] = _pair_term(sums[i + 1], i + 1, longer, shorter, t1, code_max, fresh)
-        sums[i + 2] = _pair_term(sums[i + 2], i + 2, longer, shorter, t2, code_max, fresh)
+        sums[i] = _pair_term(sums[i], i, longer, shorter, t0, l0, fresh)
+        sums[i + 1] = _pair_term(sums[i + 1], i + 1, longer, shorter, t1, l1, fresh)
+        sums[i + 2] = _pair_term(sums[i + 2], i + 2, longer, shorter, t2, l2, fresh)
 
 
 @njit(**_KERNEL)
-def _add_two_pairs(longer, shorter, longer2, shorter2, table, table2, code_max, sums,
+def _add_two_pairs(longer, shorter, longer2, shorter2, table, table2, limits, sums,
                    fresh):  # pragma: no cover - compiled
     """Two pairs of brackets over a row, the longer pair first: half the loads and
     stores of the sums that two :func:`_add_pair` calls make (1.1x faster)."""
     a0, a1, a2 = table[0], table[1], table[2]
     b0, b1, b2 = table2[0], table2[1], table2[2]
+    l0, l1, l2 = np.int32(limits[0]), np.int32(limits[1]), np.int32(limits[2])
     for x in range(longer.size // 3):
         i = 3 * x
         sums[i] = _pair_term(
-            _pair_term(sums[i], i, longer, shorter, a0, code_max, fresh),
-            i, longer2, shorter2, b0, code_max, False)
+            _pair_term(sums[i], i, longer, shorter, a0, l0, fresh),
+            i, longer2, shorter2, b0, l0, False)
         sums[i + 1] = _pair_term(
-            _pair_term(sums[i + 1], i + 1, longer, shorter, a1, code_max, fresh),
-            i + 1, longer2, shorter2, b1, code_max, False)
+            _pair_term(sums[i + 1], i + 1, longer, shorter, a1, l1, fresh),
+            i + 1, longer2, shorter2, b1, l1, False)
         sums[i + 2] = _pair_term(
-            _pair_term(sums[i + 2], i + 2, longer, shorter, a2, code_max, fresh),
-            i + 2, longer2, shorter2, b2, code_max, False)
+            _pair_term(sums[i + 2], i + 2, longer, shorter, a2, l2, fresh),
+            i + 2, longer2, shorter2, b2, l2, False)
 
 
 @njit(**_KERNEL)
-def _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max,
+def _accumulate_by_pairs(codes, y, stop, pairs, zeros, limits,
                          sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, in pairs (four brackets per pass while
     there are three or more left), longest first; a last odd bracket pairs with
@@ -250,16 +259,16 @@ def _accumulate_by_pairs(codes, y, stop, pairs, zeros, code_max,
     while j >= 2:
         _add_two_pairs(codes[j, y], codes[j - 1, y], codes[j - 2, y],
                        codes[j - 3, y] if j >= 3 else zeros, pairs[j], pairs[j - 2],
-                       code_max, sums, fresh)
+                       limits, sums, fresh)
         fresh = False
         j -= 4
     if j >= 0:
-        _add_pair(codes[j, y], codes[j - 1, y] if j >= 1 else zeros, pairs[j], code_max,
+        _add_pair(codes[j, y], codes[j - 1, y] if j >= 1 else zeros, pairs[j], limits,
                   sums, fresh)
 
 
 @njit(**_KERNEL)
-def _accumulate_by_brackets(codes, y, stop, terms, code_max,
+def _accumulate_by_brackets(codes, y, stop, terms, limits,
                             sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, one look-up per code, longest first."""
     channels = terms.shape[1]
@@ -267,11 +276,11 @@ def _accumulate_by_brackets(codes, y, stop, terms, code_max,
     j = stop - 1
     if channels == 3:
         while j >= 1:
-            _accumulate_two(codes[j, y], codes[j - 1, y], terms[j], terms[j - 1], code_max,
+            _accumulate_two(codes[j, y], codes[j - 1, y], terms[j], terms[j - 1], limits,
                             sums)
             j -= 2
     while j >= 0:
-        _accumulate(codes[j, y], terms[j], code_max, channels, sums)
+        _accumulate(codes[j, y], terms[j], limits, channels, sums)
         j -= 1
 
 
@@ -470,7 +479,7 @@ def merge_rows_by_pairs(first, last, codes, top, pairs, estimates, code_max, lim
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
         source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
-        _accumulate_by_pairs(source, row, stop, pairs, zeros, code_max, sums)
+        _accumulate_by_pairs(source, row, stop, pairs, zeros, limits, sums)
         _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
                     out, clipped_rows, black_rows, skipped_rows)
 
@@ -487,7 +496,7 @@ def merge_rows_by_brackets(first, last, codes, top, terms, estimates, code_max, 
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
         source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
-        _accumulate_by_brackets(source, row, stop, terms, code_max, sums)
+        _accumulate_by_brackets(source, row, stop, terms, limits, sums)
         _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
                     out, clipped_rows, black_rows, skipped_rows)
 
@@ -497,17 +506,17 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, 
     """Merge rows ``top .. bottom`` of the brackets into ``out`` ``(H, W * C)`` float32.
 
     ``codes`` is ``(P, H, W * C)``, shortest exposure first. ``terms[j, c, z]`` (complex64)
-    is ``w(z) x_j(z) + i w(z)``, the numerator's and the denominator's term, both 0 at
-    ``z = code_max`` (a saturated observation never counts); ``estimates[j, c, z]``
+    is ``w(z) x_j(z) + i w(z)``, the numerator's and the denominator's term, both 0 for
+    ``z >= limits[c]`` (a dropped observation never counts); ``estimates[j, c, z]``
     (float64) is ``x_j(z)`` for the fallback. ``pairs`` is :func:`pair_tables` of the
     terms (three channels of 8-bit codes), or empty for the general path.
 
     The saturation policy: ``limits`` ``(C,)`` int64, the first code of each channel that
-    is dropped (``code_max`` drops the top code only); ``pixel_rule``: a dropped channel
-    drops the whole observation (every channel of that pixel in that bracket). Unless
-    both are at their plainest (per channel, at ``code_max``), each bracket's row is first
-    remapped (:func:`_remap_row`, into a per-task buffer) so that the per-channel resets
-    apply the policy. Writes ``E``, clamped to float32's normal range. ``early_stop`` false
+    is dropped (``code_max`` drops the top code only), applied by the resets;
+    ``pixel_rule``: a dropped channel drops the whole observation (every channel of that
+    pixel in that bracket), for which each bracket's row is first remapped
+    (:func:`_remap_row`, into a per-task buffer). Writes ``E``, clamped to float32's
+    normal range. ``early_stop`` false
     reads every bracket of every row (the same result, to float32 rounding). Per row,
     for the statistics: ``clipped_rows`` (pixels with a channel at or above its limit in
     the shortest bracket), ``black_rows`` (pixels at code 0 in every channel of the longest)
@@ -517,7 +526,7 @@ def merge_kernel(codes, top, bottom, terms, estimates, pairs, code_max, limits, 
     use) whose rows the threads share in chunks (:func:`hdrio.parallel.on_threads`):
     less to compile than numba's ``parallel=True``, for the same speed.
     """
-    remap = bool(pixel_rule) or bool(np.any(limits < code_max))
+    remap = bool(pixel_rule)
     if pairs.shape[0] == codes.shape[0]:
         on_threads(merge_rows_by_pairs, bottom - top, codes, top, pairs, estimates,
                    code_max, limits, pixel_rule, remap, log_domain, early_stop, out,
