@@ -5,7 +5,7 @@ loads them in milliseconds. The first run of a job can spend most of its time co
 so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
 (:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile the kernels the
-job needs later (the merge's, the preview's tone mapping, the report's check) while this
+job needs later (the merge's, the preview's tone mapping) while this
 one reads the brackets and solves the response; it waits for them before those stages
 and then loads those kernels from the cache.
 """
@@ -21,7 +21,6 @@ STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
-    "check": ("hdrio.cms.check_kernel:count_rows",),
 }
 """The kernel whose cache stands for each stage's (they compile together)."""
 
@@ -59,21 +58,19 @@ _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
 
 
-def compile_ahead(preview: str | None, check: bool, merge: Callable[[], bool]) -> None:
+def compile_ahead(preview: str | None, merge: Callable[[], bool]) -> None:
     """On a first run, start processes (:mod:`hdrio.precompile`) compiling kernels into
     the disk cache: the merge kernel of 8-bit RGB brackets when ``merge()`` (asked only
     when that kernel is not cached); the ``preview`` operator's (a ``TONEMAP_METHODS``
-    name, or None) and the check's (when ``check``). Nothing when they are cached already
-    or this process may use one CPU only. :func:`announce` of a stage waits for its
-    process first."""
+    name, or None). Nothing when they are cached already or this process may use one CPU
+    only. :func:`announce` of a stage waits for its process first."""
     from hdrio.parallel import threads
 
     if threads() < 2:
         return
     jobs = {("merge",): ["merge"] if not is_stage_cached("merge") and merge() else [],
-            ("preview", "check"): (
-                [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])
-            + (["check"] if check and not is_stage_cached("check") else [])}
+            ("preview",): (
+                [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])}
     for stages, names in jobs.items():
         if names:
             process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile", *names],

@@ -607,12 +607,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     tonemapped = (preview is not None and display_view is None
                   and not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"))
     if compile_ahead:
-        jit.compile_ahead(tonemap if tonemapped else None, observe is not None,
-                          merge=lambda: _eight_bit_rgb(paths))
+        jit.compile_ahead(tonemap if tonemapped else None, merge=lambda: _eight_bit_rgb(paths))
     result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
                          options=options, progress=progress, read_progress=read_progress)
-    if observe is not None:
-        jit.announce(say, "check")
     start = time.perf_counter()
     say(f"writing {output}")
     result.exposure_scale = write_radiance(output, output_pixels(result),

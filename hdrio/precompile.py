@@ -31,14 +31,8 @@ def _compile_preview(operator: str) -> None:
     render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
 
 
-def _compile_check() -> None:
-    from hdrio.cms.checks import StreamingCheck
-
-    StreamingCheck().add(np.full((2, 2, 3), 0.5, np.float16))
-
-
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.precompile merge preview=OPERATOR check``: compile those kernels
+    """``python -m hdrio.precompile merge preview=OPERATOR``: compile those kernels
     (and stop when the process that started this one stops)."""
     die_with_parent(os.getppid())
     for stage in argv:
@@ -47,8 +41,6 @@ def main(argv: Sequence[str]) -> int:
             _compile_merge()
         elif name == "preview":
             _compile_preview(value)
-        elif name == "check":
-            _compile_check()
     return 0
 
 

@@ -1,4 +1,4 @@
-"""What C libraries print while OpenImageIO decodes, kept off the user's terminal."""
+"""What C libraries print while they decode, kept off the user's terminal."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import threading
 from collections.abc import Iterator
 
 _QUIET_LOCK = threading.Lock()
-_quiet = {"depth": 0, "saved": -1, "sink": None}
+_quiet: dict[str, dict] = {name: {"depth": 0, "saved": -1, "sink": None}
+                           for name in ("stdout", "stderr")}
 
 
 @contextlib.contextmanager
@@ -22,24 +23,42 @@ def quiet_native_stderr() -> Iterator[None]:
     on two threads and fd 2 belongs to the process, so the first thread in redirects it
     and the last one out restores it.
     """
+    with _quiet_native("stderr"):
+        yield
+
+
+@contextlib.contextmanager
+def quiet_native_output() -> Iterator[None]:
+    """Swallow what C libraries print on fd 1 and fd 2 (OpenEXR's Python binding warns on
+    standard output when it cannot read a file's pixels), as
+    :func:`quiet_native_stderr`."""
+    with _quiet_native("stdout"), _quiet_native("stderr"):
+        yield
+
+
+@contextlib.contextmanager
+def _quiet_native(name: str) -> Iterator[None]:
+    """fd of ``sys.<name>`` sent to a temporary file while any thread is inside."""
+    stream = getattr(sys, name)
+    state = _quiet[name]
     try:
-        fd = sys.stderr.fileno()
+        fd = stream.fileno()
     except (AttributeError, OSError, ValueError):
         yield
         return
     with _QUIET_LOCK:
-        if _quiet["depth"] == 0:
-            sys.stderr.flush()
-            _quiet["saved"] = os.dup(fd)
-            _quiet["sink"] = tempfile.TemporaryFile()
-            os.dup2(_quiet["sink"].fileno(), fd)
-        _quiet["depth"] += 1
+        if state["depth"] == 0:
+            stream.flush()
+            state["saved"] = os.dup(fd)
+            state["sink"] = tempfile.TemporaryFile()
+            os.dup2(state["sink"].fileno(), fd)
+        state["depth"] += 1
     try:
         yield
     finally:
         with _QUIET_LOCK:
-            _quiet["depth"] -= 1
-            if _quiet["depth"] == 0:
-                os.dup2(_quiet["saved"], fd)
-                os.close(_quiet["saved"])
-                _quiet["sink"].close()
+            state["depth"] -= 1
+            if state["depth"] == 0:
+                os.dup2(state["saved"], fd)
+                os.close(state["saved"])
+                state["sink"].close()
