@@ -34,7 +34,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 SKIPS = ("brackets", "response", "covered", "channels", "early-stop", "warp")
 
@@ -55,19 +54,13 @@ def well_exposed_codes(code_max: int, fractions: tuple[float, float] = WELL_EXPO
     return int(np.floor(low * code_max)) + 1, int(np.ceil(high * code_max)) - 1
 
 
-@njit(cache=True, nogil=True)
-def code_range(codes):  # pragma: no cover - compiled
-    """Smallest and largest value of ``codes`` (any shape), in one pass.
+def code_range(codes: np.ndarray) -> tuple[int, int]:
+    """Smallest and largest value of ``codes`` (any shape).
 
-    Single-threaded on purpose: brackets are read two at a time on their own threads,
-    and numba's default threading layer must not be entered from two threads at once."""
-    flat = codes.reshape(-1)
-    low = flat[0]
-    high = flat[0]
-    for i in range(flat.size):
-        low = min(low, flat[i])
-        high = max(high, flat[i])
-    return int(low), int(high)
+    NumPy's reductions (10 ms for a 24 MP bracket, just decoded and in cache): a numba
+    kernel made it 8 ms faster and cost two seconds of compiling on a first run, while
+    the reading threads waited for it."""
+    return int(codes.min()), int(codes.max())
 
 
 def classify(codes: np.ndarray, code_max: int) -> str:

@@ -40,7 +40,6 @@ import numpy as np
 
 from hdrio.io.staging import gather_pixels, strided_copy
 from hdrio.registry import MethodRegistry
-from hdrio.response.kernels import draw_from_bins
 
 DEFAULT_SAMPLES = 1000
 CANDIDATE_LIMIT = 2**14
@@ -102,8 +101,7 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     np.copyto(labels, np.uint8(_BINS), where=~unclipped)  # no candidate in that bracket
     rng = np.random.default_rng(seed)
     per_bin = max(1, math.ceil(n_samples / (count * _BINS)))
-    picked = np.empty(count * _BINS * per_bin, dtype=np.int64)
-    picked = picked[: draw_from_bins(labels, rng.random((count, _BINS)), per_bin, picked)]
+    picked = _draw_from_bins(labels, rng.random((count, _BINS)), per_bin)
     if picked.size > n_samples:
         picked = rng.choice(picked, size=n_samples, replace=False)
     elif picked.size < n_samples:
@@ -115,6 +113,43 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     picked = np.sort(picked)
     rows, cols = (picked // grid_w) * stride, (picked % grid_w) * stride
     return rows * width + cols
+
+
+def _draw_from_bins(labels: np.ndarray, phase: np.ndarray, per_bin: int) -> np.ndarray:
+    """Up to ``per_bin`` pixels of every bin of every bracket, each pixel once.
+
+    ``labels`` is ``(P, M)`` ``uint8``: each grid pixel's bin in each bracket, or
+    ``B = phase.shape[1]`` or more where it is no candidate there. A bin of ``n``
+    members, in raster order, gives its members of rank ``floor((k + u) n / per_bin)``
+    for ``k = 0 .. per_bin - 1``, ``u = phase[j, b]``: a systematic sample, every member
+    equally likely and the draws spread over the image; a bin of at most ``per_bin``
+    members gives them all (ranks repeat). Bracket by bracket, in raster order, without
+    the pixels an earlier bracket drew.
+
+    NumPy (a stable argsort per bracket, about 1 ms more than a numba loop at 24 MP,
+    which cost seconds of compiling on a first run).
+    """
+    count, size = labels.shape
+    n_bins = phase.shape[1]
+    taken = np.zeros(size, bool)
+    ranks_k = np.arange(per_bin)
+    drawn = []
+    for j in range(count):
+        candidates = np.flatnonzero(labels[j] < n_bins)
+        bins = labels[j, candidates]
+        members = np.bincount(bins, minlength=n_bins)
+        starts = np.cumsum(members) - members
+        by_bin = candidates[np.argsort(bins, kind="stable")]
+        ranks = ((ranks_k[None, :] + phase[j][:, None]) * members[:, None]
+                 / per_bin).astype(np.int64)
+        distinct = np.ones(ranks.shape, bool)
+        distinct[:, 1:] = ranks[:, 1:] != ranks[:, :-1]
+        distinct &= ranks < members[:, None]  # an empty bin gives nothing
+        chosen = np.sort(by_bin[(starts[:, None] + ranks)[distinct]])
+        chosen = chosen[~taken[chosen]]
+        taken[chosen] = True
+        drawn.append(chosen)
+    return np.concatenate(drawn) if drawn else np.empty(0, np.int64)
 
 
 def _scan_candidates(grid: np.ndarray, code_max: int) -> tuple[np.ndarray, np.ndarray]:
