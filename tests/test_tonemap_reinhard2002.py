@@ -269,3 +269,20 @@ def test_log_average_luminance_is_eq_1_with_negatives_counted_as_zero():
     # rtol 1e-12: the same float64 formula written out.
     expected = np.exp(np.mean(np.log(1e-4 + np.array([0.01, 1.0, 100.0, 0.0]))))
     np.testing.assert_allclose(log_average_luminance(L), expected, rtol=1e-12)
+
+
+def test_srgb_encoding_is_colour_sciences_inverse_eotf():
+    """The preview's sRGB encoding, written out to spare the colour-science import,
+    agrees with colour-science's ``eotf_inverse_sRGB`` to float32 rounding (2e-7 on
+    values up to 1; 1e-6 leaves room for float32 ``pow``), is clipped to [0, 1], and
+    keeps the toe's linear segment exactly."""
+    from colour.models import eotf_inverse_sRGB
+
+    from hdrio.tonemap import encode_sRGB
+
+    linear = np.concatenate([np.linspace(-0.5, 1.5, 20001), [0.0031308, 1e-8, 0.0]])
+    encoded = encode_sRGB(linear.astype(np.float32))
+    assert encoded.dtype == np.float32
+    np.testing.assert_allclose(encoded, eotf_inverse_sRGB(np.clip(linear, 0.0, 1.0)),
+                               atol=1e-6)
+    assert encoded.min() == 0.0 and encoded.max() == np.float32(1.0)
