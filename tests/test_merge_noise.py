@@ -244,3 +244,25 @@ def test_uncertainty_layer_through_the_command_and_check(brackets, out_dir, caps
     code, out, err = run(capsys, "check", output)
     assert code == 0, err
     assert re.search(r"uncertainty:\s+median \d+\.\d+ %", out), out
+
+
+def test_nonnegative_least_squares_matches_scipy():
+    """The noise fit's three-column NNLS (every subset's least squares, the best
+    non-negative one) reaches scipy's optimum: residuals equal to 1e-9 relative (both
+    exact up to the rounding of a 3x3 solve), and no negative coefficient."""
+    from scipy.optimize import nnls
+
+    from hdrio.merge.noise import nonnegative_least_squares
+
+    rng = np.random.default_rng(0)
+    for trial in range(500):
+        rows = int(rng.integers(3, 40))
+        A = rng.normal(size=(rows, 3)) * rng.lognormal(0, 2, 3)
+        b = rng.normal(size=rows) * rng.lognormal(0, 2)
+        if trial % 2:
+            A = np.abs(A)
+        expected, _ = nnls(A, b)
+        found = nonnegative_least_squares(A, b)
+        assert np.all(found >= 0)
+        assert np.linalg.norm(A @ found - b) <= np.linalg.norm(A @ expected - b) * (
+            1 + 1e-9) + 1e-12

@@ -45,11 +45,30 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import nnls
 
 from hdrio.io.staging import strided_copy
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import exposure_columns
+
+
+def nonnegative_least_squares(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``argmin ||A x - b||`` subject to ``x >= 0``, for a few columns (the noise model's
+    three): the best of the unconstrained least-squares solutions on every subset of
+    columns that come out non-negative (the optimum is one of them: on its support it
+    solves the least squares there). Exact, like ``scipy.optimize.nnls``, without the
+    0.2-0.4 s of importing scipy.optimize on every merge."""
+    columns = A.shape[1]
+    best, best_residual = np.zeros(columns), float(np.dot(b, b))
+    for subset in range(1, 1 << columns):
+        chosen = [k for k in range(columns) if subset >> k & 1]
+        x, *_ = np.linalg.lstsq(A[:, chosen], b, rcond=None)
+        if np.all(x >= 0):
+            residual = float(np.sum((A[:, chosen] @ x - b) ** 2))
+            if residual < best_residual:
+                best, best_residual = np.zeros(columns), residual
+                best[chosen] = x
+    return best
+
 
 QUANTISATION = 1.0 / 12.0
 """Variance of rounding to integer codes (code units squared)."""
@@ -233,7 +252,7 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
         y_noise = y - code_floor * A[:, 2]  # integer rounding is there regardless
         scale = np.sqrt(n) / y  # each bin to relative accuracy
         column = np.maximum(np.abs(A * scale[:, None]).max(axis=0), 1e-300)
-        solution, _ = nnls(A * scale[:, None] / column, y_noise * scale)
+        solution = nonnegative_least_squares(A * scale[:, None] / column, y_noise * scale)
         shot[c], read[c], extra = solution / column
         code[c] += extra
         used += int(n.sum())
