@@ -34,7 +34,9 @@ def write_demo_brackets(folder: str | Path, seed: int = 0) -> tuple[np.ndarray, 
     codes = render_brackets(truth, times, gamma_response, seed=seed)
     files = []
     for (n, d), frame in zip(DEMO_EXPOSURES, codes):
-        files.append(write_image(folder / f"bracket_{n}_{d}.png", frame, "uint8"))
+        # zlib level 1: 35 ms a bracket instead of 95 ms, files 9 % larger.
+        files.append(write_image(folder / f"bracket_{n}_{d}.png", frame, "uint8",
+                                 {"png:compressionLevel": 1}))
     return truth, files
 
 
