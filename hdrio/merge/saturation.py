@@ -170,16 +170,21 @@ def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseM
 
 
 def clip_interior(codes: np.ndarray, limits: np.ndarray, limit: int = MIXING_GRID_LIMIT,
-                  radius: int = _INTERIOR_RADIUS) -> np.ndarray:
+                  radius: int = _INTERIOR_RADIUS, grid: np.ndarray | None = None
+                  ) -> np.ndarray:
     """``(P, n)`` booleans on the grid of :func:`noise_grid` (``codes`` ``(P, H, W, C)``,
-    at most ``limit`` pixels): whether the pixel's clip pattern (which channels are at or
-    above their ``limits``, codes) is the same at the 8 pixels ``radius`` away (rows,
-    columns, diagonals; clamped at the image's edge).
+    at most ``limit`` pixels): true in the first bracket where the pixel has a channel at
+    or above its ``limits`` (codes), when that is not the shortest bracket and some
+    channel is still below (partly clipped), and the clip pattern (which channels are
+    at or above their limits) is the same at the 8 pixels ``radius`` away in that
+    bracket (rows, columns, diagonals; clamped at the image's edge).
 
     A clip's edge is where a lossy codec biases the unclipped channels: JPEG's 4:2:0
     chroma and its 8 x 8 transform blocks mix a pixel with its neighbours, so next to a
     clipped pixel the others take some of its false colour. Inside a clip nothing
     differs to mix, while a camera's colour matrix biases every partly clipped pixel.
+    Only the partly clipped pixels' neighbours are read, in that one bracket; ``grid``
+    is ``noise_grid(codes, limit)`` when already read.
     """
     from hdrio.io.staging import gather_pixels
     from hdrio.response.sampling import candidate_stride
@@ -187,22 +192,34 @@ def clip_interior(codes: np.ndarray, limits: np.ndarray, limit: int = MIXING_GRI
     count, height, width, channels = codes.shape
     stride = candidate_stride(height, width, limit)
     rows, cols = np.arange(0, height, stride), np.arange(0, width, stride)
+    y, x = (a.reshape(-1) for a in np.meshgrid(rows, cols, indexing="ij"))
     limits = np.asarray(limits, dtype=np.int64)
-    bits = np.int64(1) << np.arange(channels, dtype=np.int64)
 
-    def pattern(dy: int, dx: int) -> np.ndarray:
-        y = np.clip(rows + dy, 0, height - 1)
-        x = np.clip(cols + dx, 0, width - 1)
-        grid = gather_pixels(codes, (y[:, None] * width + x[None, :]).reshape(-1))
-        return ((grid >= limits) * bits).sum(axis=-1)
+    def pattern(grid: np.ndarray) -> np.ndarray:  # (P, m, C) codes -> (P, m) bit sets
+        bits = np.zeros(grid.shape[:2], dtype=np.uint64)
+        for c in range(channels):
+            bits |= (grid[..., c] >= limits[c]).astype(np.uint64) << np.uint64(c)
+        return bits
 
-    centre = pattern(0, 0)
-    inside = np.ones(centre.shape, dtype=bool)
-    for dy in (-radius, 0, radius):
-        for dx in (-radius, 0, radius):
-            if dy or dx:
-                inside &= pattern(dy, dx) == centre
-    return inside
+    centre = pattern(gather_pixels(codes, y * width + x) if grid is None else grid)
+    # The one pair that counts: the first bracket with a channel at its limit, if it is
+    # not the shortest and does not have every channel there (nothing left to compare).
+    first = np.argmax(centre > 0, axis=0)
+    at_first = np.take_along_axis(centre, first[None], axis=0)[0]
+    picked = (first > 0) & (at_first != (1 << channels) - 1)
+    out = np.zeros(centre.shape, dtype=bool)
+    for j in range(1, count):
+        pick = np.flatnonzero(picked & (first == j))
+        same = np.ones(pick.size, dtype=bool)
+        for dy in (-radius, 0, radius):
+            for dx in (-radius, 0, radius):
+                if pick.size and (dy or dx):
+                    index = (np.clip(y[pick] + dy, 0, height - 1) * width
+                             + np.clip(x[pick] + dx, 0, width - 1))
+                    same &= pattern(gather_pixels(codes[j:j + 1], index))[0] \
+                        == centre[j, pick]
+        out[j, pick] = same
+    return out
 
 
 def channel_mixing(grid: np.ndarray, response: CameraResponse, exposures,
@@ -292,7 +309,7 @@ def policy_limits(policy: str, codes: np.ndarray, response: CameraResponse,
         return limits, True
     if policy == "auto":
         # The mixing test at the white levels: the shoulders would take away its evidence.
-        interior = clip_interior(codes, limits)
+        interior = clip_interior(codes, limits, grid=grid)
         if channel_mixing(grid, response, exposures, limits, interior) <= _MIXING_SHIFT:
             return limits, False
     return shoulders(grid, response, exposures, limits), True
