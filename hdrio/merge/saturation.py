@@ -11,11 +11,12 @@ on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 ``auto`` (the default)
     ``safe`` where the stack shows its channels mixed after the clip
-    (:func:`channel_mixing`: a partly clipped observation's unclipped channels disagree
-    with the shorter bracket's), else ``channel`` with the same per-channel limits. On
-    the truth harness's renders (no mixing) the pixel rule costs accuracy for nothing
-    (median error 0.68 % against 0.56 %, p99 4.9 % against 2.4 % on Desk/dorf0,
-    ``python -m benchmarks.truth --quick``): its channels are right to keep.
+    (:func:`channel_mixing` inside clips, :func:`clip_interior`: a partly clipped
+    observation's unclipped channels disagree with the shorter bracket's), else per
+    channel (as ``channel``) at the white levels less the noise margin. On the truth harness's renders
+    (no mixing) the pixel rule costs accuracy for nothing: its channels are right to
+    keep (JPEG stacks' median error 3.93 % per channel, 4.24 % with the pixel rule and
+    the shoulders; ``python -m benchmarks.truth --group jpeg``).
 ``safe``
     an observation (one bracket at one pixel) counts only where *every* channel is
     safely below clipping: below its own white level, found in the data
