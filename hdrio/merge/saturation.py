@@ -13,10 +13,10 @@ on clip-transition pixels reaches p99 90 degrees with ``channel``.
     ``safe`` where the stack shows its channels mixed after the clip
     (:func:`channel_mixing` inside clips, :func:`clip_interior`: a partly clipped
     observation's unclipped channels disagree with the shorter bracket's), else per
-    channel (as ``channel``) at the white levels less the noise margin. On the truth harness's renders
-    (no mixing) the pixel rule costs accuracy for nothing: its channels are right to
-    keep (JPEG stacks' median error 3.93 % per channel, 4.24 % with the pixel rule and
-    the shoulders; ``python -m benchmarks.truth --group jpeg``).
+    channel (as ``channel``) at the white levels less the noise margin. On the truth
+    harness's renders (no mixing) the pixel rule costs accuracy for nothing: their
+    channels are right to keep (JPEG stacks' median error 3.93 % per channel, 4.24 %
+    with the pixel rule and the shoulders; ``python -m benchmarks.truth --group jpeg``).
 ``safe``
     an observation (one bracket at one pixel) counts only where *every* channel is
     safely below clipping: below its own white level, found in the data
