@@ -177,8 +177,8 @@ def render_camera_brackets(radiance: np.ndarray, exposures, response: Response =
                            mixing: bool = True, bit_depth: int = 8,
                            shot_noise: float = DEFAULT_SHOT_NOISE,
                            read_noise: float = DEFAULT_READ_NOISE, seed: int = 0,
-                           xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA
-                           ) -> tuple[np.ndarray, np.ndarray]:
+                           xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA,
+                           mix_before_clip: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Brackets as a camera's JPEG engine makes them, ``(P, H, W, 3)`` codes.
 
     Per bracket (exposure ``t`` seconds; ``radiance`` linear Rec. 709, relative):
@@ -195,13 +195,19 @@ def render_camera_brackets(radiance: np.ndarray, exposures, response: Response =
 
     ``mixing=False`` is the same camera without channel mixing (both matrices the
     identity; the same gains, noise and clipping): the control of the hue tests.
+    ``mix_before_clip=True`` keeps the matrix but applies it to the unclipped
+    white-balanced raw values and clips each output channel after it (steps 2-4 without
+    the raw clip): the same noise draws and the same noise gain of the matrix, but
+    nothing mixes after a clip, so dropping a clipped channel alone is right (the
+    control that isolates what mixing after the clip costs).
 
     Returns
     -------
     codes
         ``(P, H, W, 3)`` uint8 or uint16.
     raw_clipped
-        ``(P, H, W, 3)`` booleans: raw channel clipped (step 2 or 3) in that bracket.
+        ``(P, H, W, 3)`` booleans: raw channel clipped (step 2 or 3) in that bracket
+        (with ``mix_before_clip``, output channel clipped).
     """
     rng = np.random.default_rng(seed)
     code_max = 2**bit_depth - 1
@@ -217,9 +223,14 @@ def render_camera_brackets(radiance: np.ndarray, exposures, response: Response =
         X = raw_linear * t
         X = X + rng.standard_normal(X.shape) * np.sqrt(shot_noise * np.clip(X, 0, 1)
                                                        + read_noise**2)
-        balanced = np.clip(X, 0.0, 1.0) * gains
-        clipped[j] = balanced >= 1.0
-        output = np.clip(np.minimum(balanced, 1.0) @ working_from_camera.T, 0.0, 1.0)
+        if mix_before_clip:
+            output = np.maximum(X, 0.0) * gains @ working_from_camera.T
+            clipped[j] = output >= 1.0
+            output = np.clip(output, 0.0, 1.0)
+        else:
+            balanced = np.clip(X, 0.0, 1.0) * gains
+            clipped[j] = balanced >= 1.0
+            output = np.clip(np.minimum(balanced, 1.0) @ working_from_camera.T, 0.0, 1.0)
         codes[j] = np.clip(np.rint(response(output) * code_max), 0, code_max).astype(dtype)
     return codes, clipped
 

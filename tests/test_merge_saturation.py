@@ -24,11 +24,11 @@ def _scene(name: str):
     return read_scene(path, 200)
 
 
-def _hue_p99(scene, policy: str, mixing: bool, mask: np.ndarray, **noise) -> float:
+def _hue_p99(scene, policy: str, mixing: bool, mask: np.ndarray, **options) -> float:
     from benchmarks.truth.stacks import exposure_ladder
 
     times = exposure_ladder(scene, 7, 2.0)
-    codes, _ = render_camera_brackets(scene.radiance, times, mixing=mixing, seed=1, **noise)
+    codes, _ = render_camera_brackets(scene.radiance, times, mixing=mixing, seed=1, **options)
     stack = ExposureStack.from_arrays(codes, times, files=[f"f{j}.png" for j in range(7)])
     response, _ = gamma_inverse_response()
     radiance, _ = MERGE_METHODS["inverse-variance"](stack, response, saturation=policy)
@@ -50,21 +50,34 @@ def _transition(scene, **noise) -> np.ndarray:
 @pytest.mark.parametrize("name", ["Desk", "StillLife"])
 def test_hue_on_clip_transition_pixels_within_twice_the_unmixed_camera(name):
     # Without sensor noise (codes' rounding only), so that the hue error is the
-    # saturation policy's bias, not the colour matrix's noise gain (its rows amplify
-    # noise about 2.5x; with noise the safe policy equals the oracle that drops exactly
-    # the raw-clipped observations, see the next test). Measured at 200 px: Desk 1.9 vs
-    # 1.7 deg, StillLife 0.6 vs 0.5; the per-channel policy ~100 deg.
+    # saturation policy's bias, not the colour matrix's noise gain (see the next test).
+    # Measured at 200 px: Desk 1.9 vs 1.7 deg, StillLife 0.6 vs 0.5; the per-channel
+    # policy ~100 deg.
     scene = _scene(name)
     quiet = {"shot_noise": 0.0, "read_noise": 0.0}
     mask = _transition(scene, **quiet)
     assert np.count_nonzero(mask) > 1000
     control = _hue_p99(scene, "channel", False, mask, **quiet)
-    # "auto" sees the mixing on Desk; on StillLife at 200 px its mixing test finds too
-    # few partly clipped observations and keeps channels apart (a known limit: the
-    # default is not hue-true there; "safe" is).
-    for policy in ("safe", "auto") if name == "Desk" else ("safe",):
+    for policy in ("safe", "auto"):
         assert _hue_p99(scene, policy, True, mask, **quiet) <= 2 * control
     assert _hue_p99(scene, "channel", True, mask, **quiet) > 10 * control
+
+
+@pytest.mark.parametrize("name", ["Desk", "GoldenGate", "StillLife"])
+def test_hue_with_noise_within_twice_the_camera_that_mixes_before_the_clip(name):
+    # With shot and read noise the colour matrix doubles chroma noise on every pixel,
+    # clipped or not (the unmixed camera's p99 is 2.2-4.0x lower even for the camera
+    # that mixes before it clips, where the per-channel rule is right and nothing is
+    # biased). The control with the same matrix and noise draws, mixing before the
+    # clip, isolates what mixing after the clip costs. Measured at 200 px (auto,
+    # degrees): Desk 13.2 vs 12.8 (1.03x), GoldenGate 9.1 vs 5.0 (1.82x), StillLife
+    # 3.7 vs 3.2 (1.16x); the issue's bound is 2x.
+    scene = _scene(name)
+    mask = _transition(scene)
+    assert np.count_nonzero(mask) > 1000
+    control = _hue_p99(scene, "auto", True, mask, mix_before_clip=True)
+    assert _hue_p99(scene, "auto", True, mask) <= 2 * control
+    assert _hue_p99(scene, "channel", True, mask) > 2 * control
 
 
 def test_safe_policy_matches_the_raw_clip_oracle_with_noise():
@@ -97,12 +110,38 @@ def test_auto_keeps_channels_apart_on_an_unmixed_camera():
     times = exposure_ladder(scene, 7, 2.0)
     response, _ = gamma_inverse_response()
     rules = []
-    for mixing in (True, False):
-        codes, _ = render_camera_brackets(scene.radiance, times, mixing=mixing, seed=1)
+    for options in ({}, {"mixing": False}, {"mix_before_clip": True}):
+        codes, _ = render_camera_brackets(scene.radiance, times, seed=1, **options)
         _, pixel_rule = policy_limits("auto", codes, response,
                                       NoiseModel.quantisation_only(3), times)
         rules.append(pixel_rule)
-    assert rules == [True, False]
+    # Only the camera that mixes after the clip takes the pixel rule.
+    assert rules == [True, False, False]
+
+
+@pytest.mark.parametrize("name", ["CandleGlass", "GoldenGate"])
+def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
+    # JPEG's 4:2:0 chroma and 8 x 8 blocks bias the unclipped channels at a clip's edge:
+    # over all partly clipped observations the mixing statistic is 2.8 (CandleGlass)
+    # and 6.2 (GoldenGate) spreads at 200 px, above the threshold of 1; inside clips,
+    # where a camera's matrix still biases every pixel, it is 0.22 and 0.13.
+    from benchmarks.truth.stacks import exposure_ladder, jpeg_round_trip
+    from hdrio.merge import saturation
+    from hdrio.merge.noise import code_variance_floor, fit_noise, noise_grid
+    from hdrio.synthetic import render_brackets
+
+    scene = _scene(name)
+    times = exposure_ladder(scene, 7, 2.0)
+    codes = jpeg_round_trip(render_brackets(scene.radiance, times, seed=3))
+    response, _ = gamma_inverse_response()
+    noise = fit_noise(codes, times, response, code_floor=code_variance_floor(["f.jpg"]))
+    grid = noise_grid(codes, saturation.MIXING_GRID_LIMIT)
+    limits = saturation.saturation_limits(codes, response, noise, grid)
+    assert saturation.channel_mixing(grid, response, times, limits) > 1.0
+    inside = saturation.clip_interior(codes, limits)
+    assert saturation.channel_mixing(grid, response, times, limits, inside) < 0.5
+    _, pixel_rule = saturation.policy_limits("auto", codes, response, noise, times)
+    assert not pixel_rule
 
 
 def test_white_level_below_the_top_code_is_found():
@@ -131,6 +170,7 @@ def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
     output = tmp_path / "f.exr"
     result = merge_files(_frobisher(), output, options=MergeOptions(clip_mask=True),
                          pixel_type="float")
+    assert result.statistics.pixel_rule  # a 5D Mark II mixes after the clip (1.8 spreads)
     import OpenImageIO as oiio
 
     buffer = oiio.ImageBuf(str(output))
@@ -173,3 +213,17 @@ def test_clip_mask_round_trip_and_check_summary(tmp_path):
     without = merge_files(files[:3], tmp_path / "plain.exr")
     assert without.options.clip_mask is False
     assert oiio.ImageBuf(str(tmp_path / "plain.exr")).spec().nchannels == 3
+
+
+def test_clip_interior_is_false_within_the_radius_of_a_clip_edge():
+    from hdrio.merge.saturation import clip_interior
+
+    codes = np.full((2, 40, 40, 3), 100, np.uint8)
+    codes[1, :, 20:, 0] = 255  # red clipped in the right half of the longer bracket
+    inside = clip_interior(codes, np.array([250, 250, 250]), limit=40 * 40, radius=4)
+    inside = inside.reshape(2, 40, 40)
+    columns = inside[1].all(axis=0)
+    # Partly clipped from column 20; the pattern changes between columns 19 and 20, so
+    # columns 20-23 (within 4 px of it) are not interior.
+    assert not columns[:24].any() and columns[24:].all()
+    assert not inside[0].any()  # only the bracket where the pixel first clips counts

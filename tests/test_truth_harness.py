@@ -87,3 +87,14 @@ def test_hdrio_default_at_least_as_good_as_best_peer(run):
     # the quick stacks) hdrio beats colour-hdri (0.71-0.96 %) on every stack; before it,
     # colour-hdri led by 0.01-0.04 points on the two GoldenGate stacks.
     _assert_default_not_worse_than(run[1], PEERS)
+
+
+def test_group_option_keeps_one_part_of_the_design(capsys):
+    from benchmarks.truth.config import GROUPS, full_config
+
+    jpeg = full_config(groups=("jpeg",))
+    assert jpeg.stacks and {s.group for s in jpeg.stacks} == {"jpeg"}
+    everything = full_config()
+    assert sum(len(full_config(groups=(g,)).stacks) for g in GROUPS) == len(everything.stacks)
+    assert main(["--quick", "--group", "jpeg"]) == 2
+    assert "--group" in capsys.readouterr().err

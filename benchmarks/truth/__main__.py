@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from benchmarks.truth import DEFAULT_OUT
-from benchmarks.truth.config import full_config, quick_config
+from benchmarks.truth.config import GROUPS, full_config, quick_config
 from benchmarks.truth.harness import run
 from benchmarks.truth.methods import select_methods
 from benchmarks.truth.report import write_outputs
@@ -34,6 +34,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--repeats", type=int, default=None, help="timed calls per method")
     parser.add_argument("--methods", default=None,
                         help="comma-separated method names (default: all)")
+    parser.add_argument("--group", action="append", choices=GROUPS, default=[],
+                        help="run only this part of the full design (repeatable; "
+                             "not with --quick)")
     return parser.parse_args(argv)
 
 
@@ -55,6 +58,12 @@ def main(argv: list[str] | None = None) -> int:
         options["width"] = args.width or None
     if args.repeats is not None:
         options["repeats"] = args.repeats
+    if args.group:
+        if args.quick:
+            print("error: --group: the quick run has no groups (use it without --quick)",
+                  file=sys.stderr)
+            return 2
+        options["groups"] = tuple(args.group)
     try:
         select_methods(list(options["methods"] or []))
     except KeyError as error:

@@ -90,16 +90,22 @@ def full_design(scenes: Sequence[str] = SCENES, curves: Sequence[str] = CURVES
     return tuple(core + ladder + jpeg + deep)
 
 
+GROUPS = ("core", "ladder", "jpeg", "16-bit")
+
+
 def full_config(scene_paths: dict[str, str] | None = None, width: int | None = 400,
-                repeats: int = 3, methods: tuple[str, ...] | None = None) -> Config:
+                repeats: int = 3, methods: tuple[str, ...] | None = None,
+                groups: tuple[str, ...] | None = None) -> Config:
     """The full run: 73 stacks, scenes ~400 px wide (box factor 2-3), 3 timed calls on the
     core stacks; about 16 minutes on 2 cores (docs/accuracy.md has the measured time).
+    ``groups`` (of :data:`GROUPS`) keeps only those parts of the design.
 
     colour-hdri's dense least-squares solve (about 3 s a call whatever the image size)
     is most of the time, which is why the core is timed 3 times and the rest once.
     """
     scenes = tuple(scene_paths) if scene_paths else SCENES
-    return Config("full", full_design(scenes), width, repeats, dict(scene_paths or {}), methods)
+    stacks = tuple(s for s in full_design(scenes) if groups is None or s.group in groups)
+    return Config("full", stacks, width, repeats, dict(scene_paths or {}), methods)
 
 
 def quick_config(scene_paths: dict[str, str] | None = None, width: int | None = 300,
