@@ -21,6 +21,12 @@ from numba import njit
 from hdrio.parallel import on_threads
 
 
+RUN_SLOPE = 0.125
+"""Affine warps whose neighbourhoods drift by less than this (pixels per output pixel,
+each way) are resampled in runs (:func:`_warp_rows`): runs of 8 pixels or more; a
+steeper warp (a scaled grid, a large rotation) pixel by pixel."""
+
+
 @njit(cache=True, nogil=True)
 def _keys(t, weights):  # pragma: no cover - compiled
     """Keys' cubic convolution weights (a = -0.5) for offsets ``-1, 0, 1, 2`` at ``t``,
@@ -162,16 +168,32 @@ def _same_run(warp, e, y, width, height, off, y0):  # pragma: no cover - compile
 
 
 @njit(cache=True, nogil=True)
+def _run_end(warp, x, y, fx, fy, off, columns, width):  # pragma: no cover - compiled
+    """Where the run starting at output pixel ``(y, x)`` should end, from the affine warp's
+    slopes: ``fx``, ``fy`` (the start's offsets in its neighbourhood) leave ``[0, 1)``, or
+    the neighbourhood the bracket's last columns (checked by the caller)."""
+    end = min(columns, width - 2 - off)
+    for offset, slope in ((fx, warp[0, 0] - 1.0), (fy, warp[1, 0])):
+        if slope > 0.0:
+            end = min(end, x + int((1.0 - offset) / slope) + 1)
+        elif slope < 0.0:
+            end = min(end, x + int(offset / -slope) + 1)
+    return max(end, x + 1)
+
+
+@njit(cache=True, nogil=True)
 def _warp_rows(start, stop, codes, flat, warp, code_max, interpolate, out,
                out_flat):  # pragma: no cover - compiled
     """Output rows ``start .. stop - 1``. An affine warp of three channels is done in runs
     of pixels whose neighbourhoods step one pixel at a time (the whole row for a shift;
-    about ``1 / sin(angle)`` pixels for a rotation), found by a galloping search, through
+    about ``1 / sin(angle)`` pixels for a rotation, :data:`RUN_SLOPE`: its end computed from the warp's
+    slopes, then checked pixel by pixel around it), through
     :func:`_run3`; everything else (a homography, the borders) pixel by pixel."""
     height, width, channels = codes.shape
     columns = out.shape[1]
     fast = (interpolate and channels == 3 and warp[2, 0] == 0.0 and warp[2, 1] == 0.0
-            and warp[2, 2] == 1.0)
+            and warp[2, 2] == 1.0 and abs(warp[0, 0] - 1.0) < RUN_SLOPE
+            and abs(warp[1, 0]) < RUN_SLOPE)
     wx = np.empty(4)
     wy = np.empty(4)
     for y in range(start, stop):
@@ -185,19 +207,11 @@ def _warp_rows(start, stop, codes, flat, warp, code_max, interpolate, out,
                 x += 1
                 continue
             off = x0 - x
-            last = x  # the run is x .. end - 1: gallop, then bisect
-            step = 1
-            while last + step < columns and _same_run(warp, last + step, y, width, height,
-                                                      off, y0):
-                last += step
-                step *= 2
-            end = min(last + step, columns)
-            while end - last > 1:
-                middle = (last + end) // 2
-                if _same_run(warp, middle, y, width, height, off, y0):
-                    last = middle
-                else:
-                    end = middle
+            end = _run_end(warp, x, y, sx - x0, sy - y0, off, columns, width)
+            while end > x + 1 and not _same_run(warp, end - 1, y, width, height, off, y0):
+                end -= 1  # the estimate checked: the run is x .. end - 1
+            while end < columns and _same_run(warp, end, y, width, height, off, y0):
+                end += 1
             base = 3 * (x0 - 1)
             _run3(flat[y0 - 1, base:], flat[y0, base:], flat[y0 + 1, base:],
                   flat[y0 + 2, base:], out_flat[y, 3 * x:], end - x, sx - x0,
