@@ -34,50 +34,93 @@ USABLE_SAMPLES = 65536
 
 
 @njit(cache=True, nogil=True)
-def _log_at(codes, linear, y, x, low, high):  # pragma: no cover - compiled
-    """``ln sum_c linear[c, z_c]`` at ``(y, x)`` and whether every channel is usable."""
+def _log_of(z, linear, k):  # pragma: no cover - compiled
+    """``ln sum_c linear[c, z_c]`` of pixel ``k`` of ``z`` ``(5, C)``."""
     total = 0.0
-    ok = True
-    for c in range(codes.shape[2]):
-        z = codes[y, x, c]
-        ok &= (z >= low) & (z <= high)
-        total += linear[c, z]
-    return np.log(max(total, 1e-30)), ok
+    for c in range(z.shape[1]):
+        total += linear[c, z[k, c]]
+    return np.log(max(total, 1e-30))
 
 
 @njit(cache=True, nogil=True)
 def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no cover
     """``ln sum_c linear[c, z_c]`` at each point, its central differences, and whether the
-    point and its four neighbours are well exposed in every channel."""
-    height, width = codes.shape[0], codes.shape[1]
-    for i in range(ys.size):
+    point and its four neighbours are well exposed in every channel. The codes are
+    gathered first, in a loop of loads only (the reads miss the cache, and independent
+    loads wait for memory together), then worked on."""
+    height, width, channels = codes.shape
+    n = ys.size
+    gathered = np.zeros((n, 5, channels), codes.dtype)
+    for i in range(n):
+        y, x = ys[i], xs[i]
+        if 0 < y < height - 1 and 0 < x < width - 1:
+            for c in range(channels):
+                gathered[i, 0, c] = codes[y, x, c]
+                gathered[i, 1, c] = codes[y + 1, x, c]
+                gathered[i, 2, c] = codes[y - 1, x, c]
+                gathered[i, 3, c] = codes[y, x + 1, c]
+                gathered[i, 4, c] = codes[y, x - 1, c]
+    for i in range(n):
         y, x = ys[i], xs[i]
         if not (0 < y < height - 1 and 0 < x < width - 1):
             good[i] = False
             values[i] = gx[i] = gy[i] = 0.0
             continue
-        centre, ok0 = _log_at(codes, linear, y, x, low, high)
-        down, ok1 = _log_at(codes, linear, y + 1, x, low, high)
-        up, ok2 = _log_at(codes, linear, y - 1, x, low, high)
-        right, ok3 = _log_at(codes, linear, y, x + 1, low, high)
-        left, ok4 = _log_at(codes, linear, y, x - 1, low, high)
-        good[i] = ok0 & ok1 & ok2 & ok3 & ok4
-        values[i] = centre
-        gy[i] = 0.5 * (down - up)
-        gx[i] = 0.5 * (right - left)
+        z = gathered[i]
+        ok = True
+        for k in range(5):
+            for c in range(channels):
+                ok &= (z[k, c] >= low) & (z[k, c] <= high)
+        good[i] = ok
+        values[i] = _log_of(z, linear, 0)
+        gy[i] = 0.5 * (_log_of(z, linear, 1) - _log_of(z, linear, 2))
+        gx[i] = 0.5 * (_log_of(z, linear, 3) - _log_of(z, linear, 4))
+
+
+@njit(cache=True, nogil=True)
+def _grid_log(codes, linear, stride, out):  # pragma: no cover - compiled
+    """``ln sum_c linear[c, z_c]`` on every ``stride``-th pixel each way (from
+    ``stride // 2``)."""
+    for i in range(out.shape[0]):
+        y = stride // 2 + i * stride
+        for k in range(out.shape[1]):
+            x = stride // 2 + k * stride
+            total = 0.0
+            for c in range(codes.shape[2]):
+                total += linear[c, codes[y, x, c]]
+            out[i, k] = np.log(max(total, 1e-30))
+
+
+@njit(cache=True, nogil=True)
+def _grid_usable(codes, low, high, stride, out):  # pragma: no cover - compiled
+    """Whether every channel lies in ``low .. high``, on every ``stride``-th pixel."""
+    for i in range(out.shape[0]):
+        y = stride // 2 + i * stride
+        for k in range(out.shape[1]):
+            x = stride // 2 + k * stride
+            ok = True
+            for c in range(codes.shape[2]):
+                z = codes[y, x, c]
+                ok &= (z >= low) & (z <= high)
+            out[i, k] = ok
+
+
+def _grid_shape(height: int, width: int, stride: int) -> tuple[int, int]:
+    """The shape of ``array[stride // 2::stride, stride // 2::stride]``."""
+    first = stride // 2
+    return -(-(height - first) // stride), -(-(width - first) // stride)
 
 
 def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample."""
     stride = max(STRIDE, int(np.sqrt(codes.shape[0] * codes.shape[1] / GRID)))
-    grid = codes[stride // 2::stride, stride // 2::stride]
-    channels = np.arange(grid.shape[-1])
-    image = np.log(np.maximum(linear[channels, grid].sum(axis=-1), 1e-30))
+    image = np.empty(_grid_shape(codes.shape[0], codes.shape[1], stride))
+    _grid_log(codes, np.ascontiguousarray(linear, np.float64), stride, image)
     gy, gx = np.gradient(image)
     strength = (gx * gx + gy * gy).reshape(-1)
     count = min(POINTS, strength.size)
     index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
-    rows, cols = np.divmod(index, grid.shape[1])
+    rows, cols = np.divmod(index, image.shape[1])
     return rows * stride + stride // 2, cols * stride + stride // 2
 
 
@@ -85,8 +128,9 @@ def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
     """``(h, w)``: every ``stride``-th pixel of one bracket ``(H, W, C)``, whether every
     channel is well exposed (unclipped, above the noise)."""
     low, high = well_exposed_codes(code_max)
-    grid = codes[stride // 2::stride, stride // 2::stride]
-    return np.all((grid >= low) & (grid <= high), axis=-1)
+    out = np.empty(_grid_shape(codes.shape[0], codes.shape[1], stride), np.bool_)
+    _grid_usable(codes, low, high, stride, out)
+    return out
 
 
 def usable_masks(codes: np.ndarray, code_max: int) -> list[np.ndarray]:
