@@ -17,7 +17,6 @@ import numpy as np
 from numba import njit
 
 from hdrio.parallel import on_threads
-
 from hdrio.skips import well_exposed_codes
 
 BASE_PIXELS = 1_600_000

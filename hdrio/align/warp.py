@@ -11,6 +11,15 @@ nearest code, so a saturated code is never blended with an unsaturated one (a bl
 would be a well-exposed-looking code of no real radiance). Pixels whose ``W x`` falls
 outside the bracket take the nearest edge code *and* are reported uncovered (the merge
 drops them: :func:`coverage`), never invented from another bracket.
+
+Speed: an affine warp close to a shift (what ``translation`` and ``euclidean`` find) is
+resampled in runs of output pixels whose 4x4 neighbourhoods move one pixel at a time, by
+a branch-free float32 loop over the run's samples that the compiler vectorises (all
+three rules computed, one selected); rows are shared among hdrio's threads. At 24 MP
+that is about 0.33 s of CPU a bracket, against 1.5-2.2 s for the float64 loop pixel by
+pixel, which still does homographies and the borders; the two agree to the code except
+where float32 rounds a value within about 1e-6 of a half the other way (1 code, a few
+samples in a million at 8 bits).
 """
 
 from __future__ import annotations
@@ -19,7 +28,6 @@ import numpy as np
 from numba import njit
 
 from hdrio.parallel import on_threads
-
 
 RUN_SLOPE = 0.125
 """Affine warps whose neighbourhoods drift by less than this (pixels per output pixel,
@@ -184,11 +192,12 @@ def _run_end(warp, x, y, fx, fy, off, columns, width):  # pragma: no cover - com
 @njit(cache=True, nogil=True)
 def _warp_rows(start, stop, codes, flat, warp, code_max, interpolate, out,
                out_flat):  # pragma: no cover - compiled
-    """Output rows ``start .. stop - 1``. An affine warp of three channels is done in runs
-    of pixels whose neighbourhoods step one pixel at a time (the whole row for a shift;
-    about ``1 / sin(angle)`` pixels for a rotation, :data:`RUN_SLOPE`: its end computed from the warp's
-    slopes, then checked pixel by pixel around it), through
-    :func:`_run3`; everything else (a homography, the borders) pixel by pixel."""
+    """Output rows ``start .. stop - 1``. An affine warp of three channels close to a
+    shift (:data:`RUN_SLOPE`) is done in runs of pixels whose neighbourhoods step one
+    pixel at a time (the whole row for a shift; about ``1 / sin(angle)`` pixels for a
+    rotation; a run's end computed from the warp's slopes, then checked pixel by pixel
+    around it), through :func:`_run3`; everything else (a homography, the borders) pixel
+    by pixel."""
     height, width, channels = codes.shape
     columns = out.shape[1]
     fast = (interpolate and channels == 3 and warp[2, 0] == 0.0 and warp[2, 1] == 0.0
