@@ -34,15 +34,6 @@ USABLE_SAMPLES = 65536
 
 
 @njit(cache=True, nogil=True)
-def _log_of(z, linear, k):  # pragma: no cover - compiled
-    """``ln sum_c linear[c, z_c]`` of pixel ``k`` of ``z`` ``(5, C)``."""
-    total = 0.0
-    for c in range(z.shape[1]):
-        total += linear[c, z[k, c]]
-    return np.log(max(total, 1e-30))
-
-
-@njit(cache=True, nogil=True)
 def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no cover
     """``ln sum_c linear[c, z_c]`` at each point, its central differences, and whether the
     point and its four neighbours are well exposed in every channel. The codes are
@@ -60,49 +51,47 @@ def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no
                 gathered[i, 2, c] = codes[y - 1, x, c]
                 gathered[i, 3, c] = codes[y, x + 1, c]
                 gathered[i, 4, c] = codes[y, x - 1, c]
+    logs = np.empty(5)
     for i in range(n):
         y, x = ys[i], xs[i]
         if not (0 < y < height - 1 and 0 < x < width - 1):
             good[i] = False
             values[i] = gx[i] = gy[i] = 0.0
             continue
-        z = gathered[i]
         ok = True
         for k in range(5):
+            total = 0.0
             for c in range(channels):
-                ok &= (z[k, c] >= low) & (z[k, c] <= high)
+                z = gathered[i, k, c]
+                ok &= (z >= low) & (z <= high)
+                total += linear[c, z]
+            logs[k] = np.log(max(total, 1e-30))
         good[i] = ok
-        values[i] = _log_of(z, linear, 0)
-        gy[i] = 0.5 * (_log_of(z, linear, 1) - _log_of(z, linear, 2))
-        gx[i] = 0.5 * (_log_of(z, linear, 3) - _log_of(z, linear, 4))
+        values[i] = logs[0]
+        gy[i] = 0.5 * (logs[1] - logs[2])
+        gx[i] = 0.5 * (logs[3] - logs[4])
 
 
 @njit(cache=True, nogil=True)
-def _grid_log(codes, linear, stride, out):  # pragma: no cover - compiled
-    """``ln sum_c linear[c, z_c]`` on every ``stride``-th pixel each way (from
-    ``stride // 2``)."""
-    for i in range(out.shape[0]):
+def _grid(codes, linear, low, high, stride, logs, usable):  # pragma: no cover - compiled
+    """On every ``stride``-th pixel each way (from ``stride // 2``): ``ln sum_c
+    linear[c, z_c]`` into ``logs`` (when it has the grid's shape; else not computed) and
+    whether every channel lies in ``low .. high`` into ``usable``."""
+    want_logs = logs.shape[0] == usable.shape[0]
+    for i in range(usable.shape[0]):
         y = stride // 2 + i * stride
-        for k in range(out.shape[1]):
+        for k in range(usable.shape[1]):
             x = stride // 2 + k * stride
             total = 0.0
-            for c in range(codes.shape[2]):
-                total += linear[c, codes[y, x, c]]
-            out[i, k] = np.log(max(total, 1e-30))
-
-
-@njit(cache=True, nogil=True)
-def _grid_usable(codes, low, high, stride, out):  # pragma: no cover - compiled
-    """Whether every channel lies in ``low .. high``, on every ``stride``-th pixel."""
-    for i in range(out.shape[0]):
-        y = stride // 2 + i * stride
-        for k in range(out.shape[1]):
-            x = stride // 2 + k * stride
             ok = True
             for c in range(codes.shape[2]):
                 z = codes[y, x, c]
                 ok &= (z >= low) & (z <= high)
-            out[i, k] = ok
+                if want_logs:
+                    total += linear[c, z]
+            usable[i, k] = ok
+            if want_logs:
+                logs[i, k] = np.log(max(total, 1e-30))
 
 
 def _grid_shape(height: int, width: int, stride: int) -> tuple[int, int]:
@@ -114,8 +103,10 @@ def _grid_shape(height: int, width: int, stride: int) -> tuple[int, int]:
 def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample."""
     stride = max(STRIDE, int(np.sqrt(codes.shape[0] * codes.shape[1] / GRID)))
-    image = np.empty(_grid_shape(codes.shape[0], codes.shape[1], stride))
-    _grid_log(codes, np.ascontiguousarray(linear, np.float64), stride, image)
+    shape = _grid_shape(codes.shape[0], codes.shape[1], stride)
+    image = np.empty(shape)
+    _grid(codes, np.ascontiguousarray(linear, np.float64), 0, 0, stride, image,
+          np.empty(shape, np.bool_))
     gy, gx = np.gradient(image)
     strength = (gx * gx + gy * gy).reshape(-1)
     count = min(POINTS, strength.size)
@@ -129,7 +120,7 @@ def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
     channel is well exposed (unclipped, above the noise)."""
     low, high = well_exposed_codes(code_max)
     out = np.empty(_grid_shape(codes.shape[0], codes.shape[1], stride), np.bool_)
-    _grid_usable(codes, low, high, stride, out)
+    _grid(codes, np.zeros((codes.shape[2], 1)), low, high, stride, np.empty((0, 0)), out)
     return out
 
 
