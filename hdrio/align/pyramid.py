@@ -129,7 +129,7 @@ def base_image(codes: np.ndarray, linear: np.ndarray, code_max: int,
 def downsample(image: np.ndarray) -> np.ndarray:
     """2x2 block mean (a trailing odd row or column is dropped)."""
     h, w = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
-    image = image[:h, :w].astype(np.float32)
+    image = image[:h, :w].astype(np.float32, copy=False)
     return 0.25 * (image[0::2, 0::2] + image[1::2, 0::2] + image[0::2, 1::2]
                    + image[1::2, 1::2])
 
