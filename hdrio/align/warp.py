@@ -182,10 +182,11 @@ def _run_end(warp, x, y, fx, fy, off, columns, width):  # pragma: no cover - com
     the neighbourhood the bracket's last columns (checked by the caller)."""
     end = min(columns, width - 2 - off)
     for offset, slope in ((fx, warp[0, 0] - 1.0), (fy, warp[1, 0])):
-        if slope > 0.0:
-            end = min(end, x + int((1.0 - offset) / slope) + 1)
-        elif slope < 0.0:
-            end = min(end, x + int(offset / -slope) + 1)
+        if slope == 0.0:
+            continue
+        limit = x + 1.0 + ((1.0 - offset) / slope if slope > 0.0 else offset / -slope)
+        if limit < end:  # compared as floats: a tiny slope's limit overflows an int
+            end = int(limit)
     return max(end, x + 1)
 
 
