@@ -252,9 +252,8 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
     ``guess`` when given), judged by its evidence: ``(warp, None)``, the identity when
     the warp fits no better than no motion, or ``(identity, why)`` when it cannot be
     trusted."""
-    if guess is None:  # to a quarter of the refinement's coarsest pixel: well in its reach
-        dx, dy = align_Ward2003(base_k.grey, base_j.grey, MTB_LEVELS, code_max,
-                                finest=max(0, len(pyramid_k) - 3))
+    if guess is None:
+        dx, dy = align_Ward2003(base_k.grey, base_j.grey, MTB_LEVELS, code_max)
         guess = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
     step = refine_LucasKanade(pyramid_k, pyramid_j, guess, model)
     still = np.eye(3)

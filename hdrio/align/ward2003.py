@@ -57,7 +57,7 @@ def _difference(ref, ref_keep, mov, mov_keep, dx: int, dy: int) -> int:
 
 
 def align_Ward2003(reference: np.ndarray, moving: np.ndarray, levels: int,
-                   code_max: int = 255, finest: int = 0) -> tuple[int, int]:
+                   code_max: int = 255) -> tuple[int, int]:
     """The integer shift ``(dx, dy)`` with ``moving(x + dx, y + dy) ~ reference(x, y)``.
 
     Parameters
@@ -68,10 +68,6 @@ def align_Ward2003(reference: np.ndarray, moving: np.ndarray, levels: int,
         Pyramid levels: shifts up to ``2^levels - 1`` pixels are found.
     code_max
         Saturation code (scales the exclusion band).
-    finest
-        The finest level compared: the shift is found to ``2^finest`` pixels (a caller
-        that refines from a coarse level needs no more; the finest levels are most of the
-        work). 0: to the pixel.
     """
     noise = NOISE_CODES * code_max / 255.0
     pyramid = [(reference.astype(np.float32, copy=False), moving.astype(np.float32, copy=False))]
@@ -80,9 +76,8 @@ def align_Ward2003(reference: np.ndarray, moving: np.ndarray, levels: int,
         if min(ref.shape) < 16:
             break
         pyramid.append((downsample(ref), downsample(mov)))
-    finest = min(finest, len(pyramid) - 1)
     dx = dy = 0
-    for ref, mov in reversed(pyramid[finest:]):
+    for ref, mov in reversed(pyramid):
         dx, dy = 2 * dx, 2 * dy
         ref_bits, ref_keep = _bitmaps(ref, noise)
         mov_bits, mov_keep = _bitmaps(mov, noise)
@@ -92,4 +87,4 @@ def align_Ward2003(reference: np.ndarray, moving: np.ndarray, levels: int,
             if best is None or score < best[0]:
                 best = (score, dx + ox, dy + oy)
         _, dx, dy = best
-    return dx * 2**finest, dy * 2**finest
+    return dx, dy
