@@ -26,8 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.ndimage
-from numba import njit, prange
+from numba import njit
 
+from hdrio.parallel import on_threads
 from hdrio.skips import well_exposed_codes
 
 CELL = 8
@@ -119,11 +120,12 @@ def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - com
     return known[j] == 1
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def _consistency(codes, estimates, variance, reference, cell, stride, cap, resampled, black,
-                 high, suspect, todo, sums, counts, takeovers):  # pragma: no cover - compiled
-    """Per bracket and cell (those ``todo``), the sum and count of the capped ``d^2`` of
-    its samples.
+@njit(cache=True, nogil=True)
+def _consistency(start, stop, codes, estimates, variance, reference, cell, stride, cap,
+                 resampled, black, high, suspect, todo, sums, counts,
+                 takeovers):  # pragma: no cover - compiled
+    """Per bracket and cell (those ``todo``, in cell rows ``start .. stop - 1``), the sum
+    and count of the capped ``d^2`` of its samples.
 
     ``d`` is the distance from ``x_j`` to the *range* of the reference's estimates in a
     3x3 neighbourhood (0 inside it) when the brackets were ``resampled``: a resampled
@@ -134,26 +136,43 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
     bracket compared has some channel above ``high`` within :data:`CLIP_RADIUS` pixels: a
     camera bends the other channels next to a clipped one (highlight roll-off,
     white balance of a clipped channel, JPEG's ringing and half-resolution chroma),
-    and that is not motion. (Asked only of suspect samples: a few per cent of them.)"""
+    and that is not motion. (Asked only of suspect samples: a few per cent of them.)
+
+    A row of samples is gathered from every bracket first, bracket by bracket along the
+    row (loads only: the reads miss the cache, and the prefetcher follows a stride), then
+    tested; reading every bracket at each sample in turn waited on memory at each."""
     count, height, width, channels = codes.shape
-    rows, cols = sums.shape[1], sums.shape[2]
-    for cy in prange(rows):
-        start_low = np.empty(channels)
-        start_high = np.empty(channels)
-        start_var = np.empty(channels)
-        low = np.empty(channels)
-        high_e = np.empty(channels)
-        chain_var = np.empty(channels)
-        chain = np.empty(channels, np.int64)
-        known = np.empty(count, np.int8)
-        for cx in range(cols):
-            if not todo[cy, cx]:
-                continue
-            for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
+    cols = sums.shape[2]
+    start_low = np.empty(channels)
+    start_high = np.empty(channels)
+    start_var = np.empty(channels)
+    low = np.empty(channels)
+    high_e = np.empty(channels)
+    chain_var = np.empty(channels)
+    chain = np.empty(channels, np.int64)
+    known = np.empty(count, np.int8)
+    gathered = np.empty((cols * (cell // stride + 1), count, channels), codes.dtype)
+    for cy in range(start, stop):
+        for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
+            for j in range(count):
+                i = 0
+                for cx in range(cols):
+                    if todo[cy, cx]:
+                        for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell),
+                                       stride):
+                            for c in range(channels):
+                                gathered[i, j, c] = codes[j, y, x, c]
+                            i += 1
+            i = 0
+            for cx in range(cols):
+                if not todo[cy, cx]:
+                    continue
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
+                    sample = gathered[i]
+                    i += 1
                     known[:] = -1
                     for c in range(channels):
-                        z = codes[reference, y, x, c]
+                        z = sample[reference, c]
                         start_var[c] = variance[reference, c, z]
                         if np.isfinite(start_var[c]):
                             if resampled:
@@ -171,7 +190,7 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
                             total = 0.0
                             used = 0
                             for c in range(channels):
-                                z = codes[j, y, x, c]
+                                z = sample[j, c]
                                 v = variance[j, c, z]
                                 if not np.isfinite(v):
                                     continue  # clipped or black here: says nothing
@@ -204,11 +223,12 @@ def _consistency(codes, estimates, variance, reference, cell, stride, cap, resam
 
 
 @njit(cache=True, nogil=True)
-def _log_ratios(codes, estimates, variance, reference, target, stride, limit, sums,
+def _log_ratios(codes, log_estimates, variance, reference, target, stride, limit, sums,
                 counts):  # pragma: no cover - compiled
-    """Per channel and code of bracket ``target``: sums and counts of ``ln(x_target /
-    x_chain)`` over every ``stride``-th pixel, where both are usable and within
-    ``limit`` of each other (a moving object is left out)."""
+    """Per channel and code of bracket ``target``: sums and counts of ``ln x_target -
+    ln x_chain`` (``log_estimates``: the tables' ``ln``, so that no sample takes a
+    logarithm) over every ``stride``-th pixel, where both are usable and within ``limit``
+    of each other (a moving object is left out)."""
     count, height, width, channels = codes.shape
     direction = 1 if target > reference else -1
     chain = np.empty(channels)
@@ -217,20 +237,20 @@ def _log_ratios(codes, estimates, variance, reference, target, stride, limit, su
         for x in range(stride // 2, width, stride):
             for c in range(channels):
                 z = codes[reference, y, x, c]
-                chain[c] = estimates[reference, c, z]
+                chain[c] = log_estimates[reference, c, z]
                 chain_var[c] = variance[reference, c, z]
             j = reference + direction
             while j != target:
                 for c in range(channels):
                     z = codes[j, y, x, c]
                     if not np.isfinite(chain_var[c]) and np.isfinite(variance[j, c, z]):
-                        chain[c] = estimates[j, c, z]
+                        chain[c] = log_estimates[j, c, z]
                         chain_var[c] = variance[j, c, z]
                 j += direction
             for c in range(channels):
                 z = codes[target, y, x, c]
                 if np.isfinite(chain_var[c]) and np.isfinite(variance[target, c, z]):
-                    r = math.log(estimates[target, c, z] / chain[c])
+                    r = log_estimates[target, c, z] - chain[c]
                     if abs(r) < limit:
                         sums[c, z] += r
                         counts[c, z] += 1
@@ -251,10 +271,16 @@ def comparametric_correction(codes: np.ndarray, estimates: np.ndarray, variance:
     corrected = np.array(estimates, np.float64)
     levels = corrected.shape[2]
     order = [*range(reference - 1, -1, -1), *range(reference + 1, count)]
+    # The samples, gathered once into a small array: each bracket's test walks the chain
+    # of brackets between it and the reference, and strided reads of the full brackets
+    # missed the cache at every sample of every walk.
+    grid = np.ascontiguousarray(codes[:, stride // 2::stride, stride // 2::stride])
     for j in order:
         sums = np.zeros((channels, levels))
         counts = np.zeros((channels, levels))
-        _log_ratios(codes, corrected, variance, reference, j, stride, LIMIT, sums, counts)
+        with np.errstate(divide="ignore"):
+            logs = np.log(corrected)
+        _log_ratios(grid, logs, variance, reference, j, 1, LIMIT, sums, counts)
         smooth = max(1.0, levels / 128.0)
         for c in range(channels):
             weight = scipy.ndimage.gaussian_filter1d(counts[c], smooth, mode="nearest")
@@ -336,8 +362,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         shape = (count, *todo.shape)
         sums, counts, takeovers = np.zeros(shape), np.zeros(shape, np.int64), \
             np.zeros(shape, np.int64)
-        _consistency(codes, estimates, variance, reference, size, stride, CAP, resampled,
-                     black, high, SUSPECT, todo, sums, counts, takeovers)
+        on_threads(_consistency, todo.shape[0], codes, estimates, variance, reference, size,
+                   stride, CAP, resampled, black, high, SUSPECT, todo, sums, counts,
+                   takeovers)
         return sums / np.maximum(counts, 1), counts, takeovers
 
     # A quick look first (:data:`COARSE`): cells that many times wider, samples that many
@@ -367,11 +394,16 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     last_cols = np.minimum((np.arange(cols) * cell + cell - 1) // size, suspect.shape[1] - 1)
     todo = (suspect[fine_rows][:, fine_cols] | suspect[last_rows][:, last_cols]
             | suspect[fine_rows][:, last_cols] | suspect[last_rows][:, fine_cols])
+    keep = np.ones((count, rows, cols), np.float32)
+    if not todo.any():  # nothing disagrees anywhere (a still stack): no fine test
+        if coverage is not None:
+            keep *= coverage
+            keep[reference] = 1.0
+        return Deghosting(keep, cell, reference, 0.0)
     mean, counts, takeovers = test(cell, STRIDE, np.ascontiguousarray(todo))
     judged = counts >= MIN_SAMPLES
     flagged = (mean > limits[:, None, None]) & judged
     flagged[reference] = False
-    keep = np.ones((count, rows, cols), np.float32)
     moved = np.zeros((rows, cols), bool)
     for j in range(count):
         if not flagged[j].any():

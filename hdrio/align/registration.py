@@ -294,13 +294,18 @@ def align_stack(stack: ExposureStack, alignment: Alignment,
     buffer (for a caller that owns a freshly read stack: no second copy of the codes);
     otherwise the codes are copied first and ``stack`` is left as it was.
     """
-    codes = stack.codes if in_place else np.array(stack.codes)
-    buffer = np.empty(codes.shape[1:], codes.dtype)
+    codes = stack.codes if in_place else np.empty_like(stack.codes)
+    buffer = np.empty(codes.shape[1:], codes.dtype) if in_place else None
     for j in range(stack.count):
         if j == alignment.reference or alignment.motion[j] == 0.0:
+            if not in_place:
+                codes[j] = stack.codes[j]
             continue
-        warp_codes(codes[j], alignment.transforms[j], stack.code_max, buffer)
-        codes[j] = buffer
+        if in_place:
+            warp_codes(codes[j], alignment.transforms[j], stack.code_max, buffer)
+            codes[j] = buffer
+        else:  # straight into the copy: no second pass over the bracket
+            warp_codes(stack.codes[j], alignment.transforms[j], stack.code_max, codes[j])
     return replace(stack, codes=codes)
 
 

@@ -124,7 +124,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         stack.codes, linear_tables(response, stack.exposures),
         consistency_variance(response, stack.exposures, noise), reference, cells,
         resampled=motion.warped)
-    motion.keep = motion.deghosting.keep
+    keep = motion.deghosting.keep
+    motion.keep = keep if cells is not None or keep.min() < 1.0 else None  # nothing dropped
     if solve is not None and motion.deghosting.fraction > 0:
         dropped = motion.deghosting.keep.min(axis=0) < 1
         exclude = np.repeat(np.repeat(dropped, CELL, axis=0), CELL, axis=1)[:height, :width]

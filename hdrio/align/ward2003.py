@@ -70,7 +70,7 @@ def align_Ward2003(reference: np.ndarray, moving: np.ndarray, levels: int,
         Saturation code (scales the exclusion band).
     """
     noise = NOISE_CODES * code_max / 255.0
-    pyramid = [(reference.astype(np.float32), moving.astype(np.float32))]
+    pyramid = [(reference.astype(np.float32, copy=False), moving.astype(np.float32, copy=False))]
     for _ in range(levels - 1):
         ref, mov = pyramid[-1]
         if min(ref.shape) < 16:

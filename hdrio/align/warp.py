@@ -11,12 +11,28 @@ nearest code, so a saturated code is never blended with an unsaturated one (a bl
 would be a well-exposed-looking code of no real radiance). Pixels whose ``W x`` falls
 outside the bracket take the nearest edge code *and* are reported uncovered (the merge
 drops them: :func:`coverage`), never invented from another bracket.
+
+Speed: an affine warp close to a shift (what ``translation`` and ``euclidean`` find) is
+resampled in runs of output pixels whose 4x4 neighbourhoods move one pixel at a time, by
+a branch-free float32 loop over the run's samples that the compiler vectorises (all
+three rules computed, one selected); rows are shared among hdrio's threads. At 24 MP
+that is about 0.33 s of CPU a bracket, against 1.5-2.2 s for the float64 loop pixel by
+pixel, which still does homographies and the borders; the two agree to the code except
+where float32 rounds a value within about 1e-6 of a half the other way (1 code, a few
+samples in a million at 8 bits).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+
+from hdrio.parallel import on_threads
+
+RUN_SLOPE = 0.125
+"""Affine warps whose neighbourhoods drift by less than this (pixels per output pixel,
+each way) are resampled in runs (:func:`_warp_rows`): runs of 8 pixels or more; a
+steeper warp (a scaled grid, a large rotation) pixel by pixel."""
 
 
 @njit(cache=True, nogil=True)
@@ -31,60 +47,186 @@ def _keys(t, weights):  # pragma: no cover - compiled
     weights[3] = 0.5 * t3 - 0.5 * t2
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def _warp_kernel(codes, warp, code_max, interpolate, out):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True)
+def _source(warp, x, y, width, height):  # pragma: no cover - compiled
+    """``W (x, y, 1)``, clamped to the bracket."""
+    w = warp[2, 0] * x + warp[2, 1] * y + warp[2, 2]
+    sx = (warp[0, 0] * x + warp[0, 1] * y + warp[0, 2]) / w
+    sy = (warp[1, 0] * x + warp[1, 1] * y + warp[1, 2]) / w
+    return min(max(sx, 0.0), width - 1.0), min(max(sy, 0.0), height - 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _pixel(codes, sx, sy, code_max, interpolate, out, y, x, wx, wy):  # pragma: no cover
+    """Output pixel ``(y, x)`` from the bracket at ``(sx, sy)``, one channel at a time:
+    the rules of the module's docstring, in float64."""
     height, width, channels = codes.shape
-    for y in prange(out.shape[0]):
-        wx = np.empty(4)
-        wy = np.empty(4)
-        for x in range(out.shape[1]):
-            w = warp[2, 0] * x + warp[2, 1] * y + warp[2, 2]
-            sx = (warp[0, 0] * x + warp[0, 1] * y + warp[0, 2]) / w
-            sy = (warp[1, 0] * x + warp[1, 1] * y + warp[1, 2]) / w
-            sx = min(max(sx, 0.0), width - 1.0)
-            sy = min(max(sy, 0.0), height - 1.0)
+    x0 = int(sx)
+    y0 = int(sy)
+    fx = sx - x0
+    fy = sy - y0
+    nx = min(x0 + 1, width - 1) if fx >= 0.5 else x0
+    ny = min(y0 + 1, height - 1) if fy >= 0.5 else y0
+    cubic = interpolate and 1 <= x0 < width - 2 and 1 <= y0 < height - 2
+    _keys(fx, wx)
+    _keys(fy, wy)
+    for c in range(channels):
+        if not cubic:
+            out[y, x, c] = codes[ny, nx, c]
+            continue
+        inside = True  # all 16 usable
+        near = True  # the 4 nearest usable
+        low = code_max
+        high = 0
+        value = 0.0
+        for i in range(4):
+            row = 0.0
+            for k in range(4):
+                z = codes[y0 - 1 + i, x0 - 1 + k, c]
+                usable = (z > 0) & (z < code_max)
+                inside &= usable
+                row += wx[k] * z
+                if 1 <= i <= 2 and 1 <= k <= 2:
+                    near &= usable
+                    low = min(low, z)
+                    high = max(high, z)
+            value += wy[i] * row
+        if inside:  # clamped to the four nearest: no overshoot at edges
+            out[y, x, c] = int(min(max(value, low), high) + 0.5)
+        elif near:
+            a = codes[y0, x0, c]
+            b = codes[y0, x0 + 1, c]
+            d = codes[y0 + 1, x0, c]
+            e = codes[y0 + 1, x0 + 1, c]
+            value = ((1.0 - fy) * ((1.0 - fx) * a + fx * b)
+                     + fy * ((1.0 - fx) * d + fx * e))
+            out[y, x, c] = int(value + 0.5)
+        else:
+            out[y, x, c] = codes[ny, nx, c]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _keys32(t):  # pragma: no cover - compiled
+    """:func:`_keys` in float32, as a tuple (for the vectorised loop)."""
+    t2 = t * t
+    t3 = t2 * t
+    h = np.float32(0.5)
+    return (-h * t3 + t2 - h * t, np.float32(1.5) * t3 - np.float32(2.5) * t2 + np.float32(1.0),
+            np.float32(-1.5) * t3 + np.float32(2.0) * t2 + h * t, h * t3 - h * t2)
+
+
+@njit(cache=True, nogil=True)
+def _run3(r0, r1, r2, r3, o, count, fx0, dfx, fy0, dfy, code_max):  # pragma: no cover
+    """``count`` pixels of three channels along an output row whose 4x4 neighbourhoods
+    are at the same place in the rows ``r0 .. r3`` (flattened ``(W * 3,)``, starting at
+    the first pixel's top-left neighbour) one pixel further each: the module's rules in
+    float32, branch-free, so that the compiler vectorises the loop over samples.
+    ``fx0 + dfx * k``, ``fy0 + dfy * k``: pixel ``k``'s offsets from its neighbourhood's
+    second column and row (an affine warp)."""
+    top = np.float32(code_max)
+    fx0 = np.float32(fx0)
+    dfx = np.float32(dfx)
+    fy0 = np.float32(fy0)
+    dfy = np.float32(dfy)
+    half = np.float32(0.5)
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    for j in range(3 * count):  # from 0: no negative-index fix-ups, contiguous loads
+        k = np.float32(j // 3)
+        fx = fx0 + dfx * k
+        fy = fy0 + dfy * k
+        wx0, wx1, wx2, wx3 = _keys32(fx)
+        wy0, wy1, wy2, wy3 = _keys32(fy)
+        a0, a1, a2, a3 = (np.float32(r0[j]), np.float32(r0[j + 3]), np.float32(r0[j + 6]),
+                          np.float32(r0[j + 9]))
+        b0, b1, b2, b3 = (np.float32(r1[j]), np.float32(r1[j + 3]), np.float32(r1[j + 6]),
+                          np.float32(r1[j + 9]))
+        c0, c1, c2, c3 = (np.float32(r2[j]), np.float32(r2[j + 3]), np.float32(r2[j + 6]),
+                          np.float32(r2[j + 9]))
+        d0, d1, d2, d3 = (np.float32(r3[j]), np.float32(r3[j + 3]), np.float32(r3[j + 6]),
+                          np.float32(r3[j + 9]))
+        low4 = min(min(b1, b2), min(c1, c2))
+        high4 = max(max(b1, b2), max(c1, c2))
+        low = min(min(min(a0, a1), min(a2, a3)), min(min(d0, d1), min(d2, d3)))
+        low = min(min(low, low4), min(min(b0, b3), min(c0, c3)))
+        high = max(max(max(a0, a1), max(a2, a3)), max(max(d0, d1), max(d2, d3)))
+        high = max(max(high, high4), max(max(b0, b3), max(c0, c3)))
+        value = (wy0 * (wx0 * a0 + wx1 * a1 + wx2 * a2 + wx3 * a3)
+                 + wy1 * (wx0 * b0 + wx1 * b1 + wx2 * b2 + wx3 * b3)
+                 + wy2 * (wx0 * c0 + wx1 * c1 + wx2 * c2 + wx3 * c3)
+                 + wy3 * (wx0 * d0 + wx1 * d1 + wx2 * d2 + wx3 * d3))
+        cubic = min(max(value, low4), high4)
+        gx = one - fx
+        linear = (one - fy) * (gx * b1 + fx * b2) + fy * (gx * c1 + fx * c2)
+        upper = b2 if fx >= half else b1
+        lower = c2 if fx >= half else c1
+        nearest = lower if fy >= half else upper
+        inside = (low > zero) & (high < top)
+        near = (low4 > zero) & (high4 < top)
+        o[j] = np.int32((cubic if inside else (linear if near else nearest)) + half)
+
+
+@njit(cache=True, nogil=True)
+def _same_run(warp, e, y, width, height, off, y0):  # pragma: no cover - compiled
+    """Whether output pixel ``(y, e)`` has its cubic neighbourhood inside the bracket at
+    column ``e + off - 1`` and row ``y0 - 1``."""
+    sx, sy = _source(warp, e, y, width, height)
+    x0 = int(sx)
+    return x0 - e == off and int(sy) == y0 and x0 < width - 2
+
+
+@njit(cache=True, nogil=True)
+def _run_end(warp, x, y, fx, fy, off, columns, width):  # pragma: no cover - compiled
+    """Where the run starting at output pixel ``(y, x)`` should end, from the affine warp's
+    slopes: ``fx``, ``fy`` (the start's offsets in its neighbourhood) leave ``[0, 1)``, or
+    the neighbourhood the bracket's last columns (checked by the caller)."""
+    end = min(columns, width - 2 - off)
+    for offset, slope in ((fx, warp[0, 0] - 1.0), (fy, warp[1, 0])):
+        if slope == 0.0:
+            continue
+        limit = x + 1.0 + ((1.0 - offset) / slope if slope > 0.0 else offset / -slope)
+        if limit < end:  # compared as floats: a tiny slope's limit overflows an int
+            end = int(limit)
+    return max(end, x + 1)
+
+
+@njit(cache=True, nogil=True)
+def _warp_rows(start, stop, codes, flat, warp, code_max, interpolate, out,
+               out_flat):  # pragma: no cover - compiled
+    """Output rows ``start .. stop - 1``. An affine warp of three channels close to a
+    shift (:data:`RUN_SLOPE`) is done in runs of pixels whose neighbourhoods step one
+    pixel at a time (the whole row for a shift; about ``1 / sin(angle)`` pixels for a
+    rotation; a run's end computed from the warp's slopes, then checked pixel by pixel
+    around it), through :func:`_run3`; everything else (a homography, the borders) pixel
+    by pixel."""
+    height, width, channels = codes.shape
+    columns = out.shape[1]
+    fast = (interpolate and channels == 3 and warp[2, 0] == 0.0 and warp[2, 1] == 0.0
+            and warp[2, 2] == 1.0 and abs(warp[0, 0] - 1.0) < RUN_SLOPE
+            and abs(warp[1, 0]) < RUN_SLOPE)
+    wx = np.empty(4)
+    wy = np.empty(4)
+    for y in range(start, stop):
+        x = 0
+        while x < columns:
+            sx, sy = _source(warp, x, y, width, height)
             x0 = int(sx)
             y0 = int(sy)
-            fx = sx - x0
-            fy = sy - y0
-            nx = min(x0 + 1, width - 1) if fx >= 0.5 else x0
-            ny = min(y0 + 1, height - 1) if fy >= 0.5 else y0
-            cubic = interpolate and 1 <= x0 < width - 2 and 1 <= y0 < height - 2
-            _keys(fx, wx)
-            _keys(fy, wy)
-            for c in range(channels):
-                if not cubic:
-                    out[y, x, c] = codes[ny, nx, c]
-                    continue
-                inside = True  # all 16 usable
-                near = True  # the 4 nearest usable
-                low = code_max
-                high = 0
-                value = 0.0
-                for i in range(4):
-                    row = 0.0
-                    for k in range(4):
-                        z = codes[y0 - 1 + i, x0 - 1 + k, c]
-                        usable = (z > 0) & (z < code_max)
-                        inside &= usable
-                        row += wx[k] * z
-                        if 1 <= i <= 2 and 1 <= k <= 2:
-                            near &= usable
-                            low = min(low, z)
-                            high = max(high, z)
-                    value += wy[i] * row
-                if inside:  # clamped to the four nearest: no overshoot at edges
-                    out[y, x, c] = int(min(max(value, low), high) + 0.5)
-                elif near:
-                    a = codes[y0, x0, c]
-                    b = codes[y0, x0 + 1, c]
-                    d = codes[y0 + 1, x0, c]
-                    e = codes[y0 + 1, x0 + 1, c]
-                    value = ((1.0 - fy) * ((1.0 - fx) * a + fx * b)
-                             + fy * ((1.0 - fx) * d + fx * e))
-                    out[y, x, c] = int(value + 0.5)
-                else:
-                    out[y, x, c] = codes[ny, nx, c]
+            if not (fast and 1 <= x0 < width - 2 and 1 <= y0 < height - 2):
+                _pixel(codes, sx, sy, code_max, interpolate, out, y, x, wx, wy)
+                x += 1
+                continue
+            off = x0 - x
+            end = _run_end(warp, x, y, sx - x0, sy - y0, off, columns, width)
+            while end > x + 1 and not _same_run(warp, end - 1, y, width, height, off, y0):
+                end -= 1  # the estimate checked: the run is x .. end - 1
+            while end < columns and _same_run(warp, end, y, width, height, off, y0):
+                end += 1
+            base = 3 * (x0 - 1)
+            _run3(flat[y0 - 1, base:], flat[y0, base:], flat[y0 + 1, base:],
+                  flat[y0 + 2, base:], out_flat[y, 3 * x:], end - x, sx - x0,
+                  warp[0, 0] - 1.0, sy - y0, warp[1, 0], code_max)
+            x = end
 
 
 def warp_codes(codes: np.ndarray, warp: np.ndarray, code_max: int,
@@ -93,10 +235,18 @@ def warp_codes(codes: np.ndarray, warp: np.ndarray, code_max: int,
 
     ``out`` (same dtype, not ``codes`` itself; by default ``codes``' shape) receives the
     result, for ``x, y`` over its own rows and columns. ``interpolate`` false takes the
-    nearest code everywhere."""
+    nearest code everywhere. Rows are shared among hdrio's threads
+    (:func:`hdrio.parallel.on_threads`)."""
     if out is None:
         out = np.empty_like(codes)
-    _warp_kernel(codes, np.ascontiguousarray(warp, np.float64), code_max, interpolate, out)
+    codes = np.ascontiguousarray(codes)
+    target = out if out.flags.c_contiguous else np.empty_like(out)
+    flat = codes.reshape(codes.shape[0], -1)
+    on_threads(_warp_rows, out.shape[0], codes, flat,
+               np.ascontiguousarray(warp, np.float64), int(code_max), bool(interpolate),
+               target, target.reshape(target.shape[0], -1))
+    if target is not out:
+        out[...] = target
     return out
 
 
