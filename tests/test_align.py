@@ -368,3 +368,30 @@ def test_masked_remerge_keeps_the_merge_where_only_a_dropped_bracket_saw():
     codes[1] = 200  # the reference sees it: the dropped bracket's view is replaced
     remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
     assert np.allclose(radiance, 200 / 4.0)
+
+
+def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):
+    """Brackets staged in a file are tested a band of cell rows at a time, each band's
+    pages given back (the 9-bracket peak); the keep weights are exactly those of the
+    same brackets in memory."""
+    from hdrio.align.deghost import TEST_BANDS, consistency_variance, deghost
+    from hdrio.align.registration import linear_tables
+    from hdrio.io.staging import codes_buffer, is_staged
+    from hdrio.response.debevec1997 import response_Debevec1997
+    from tests.align_truth import render, view
+
+    crop, truth, exposures, still = truth_scene
+    level = float(np.median(truth))
+    views = [view(crop, np.eye(3), [(60, 80, 60, 30, (4 * level,) * 3)] if j == 2 else [])
+             for j in range(3)]
+    codes = render(views, exposures)
+    staged = codes_buffer(codes.shape, codes.dtype, budget=0)
+    staged[:] = codes
+    assert is_staged(staged) and codes.shape[1] // 8 > TEST_BANDS  # more rows than bands
+    response = response_Debevec1997(ExposureStack.from_arrays(codes, exposures))
+    tables = linear_tables(response, np.asarray(exposures))
+    variance = consistency_variance(response, np.asarray(exposures))
+    in_memory = deghost(codes, tables, variance, 1, resampled=False)
+    banded = deghost(staged, tables, variance, 1, resampled=False)
+    assert in_memory.fraction > 0  # the object is found
+    np.testing.assert_array_equal(banded.keep, in_memory.keep)
