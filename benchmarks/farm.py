@@ -137,7 +137,10 @@ def main(argv: list[str] | None = None) -> int:
         / by_name["--group --dask local:2"]["seconds"],
         "pool 2 workers / 1 worker on one core": by_name[
             "--group, 1 worker pinned to one core (taskset -c 0)"]["seconds"]
-        / by_name["--group, local pool of 2 (--threads 2)"]["seconds"]}
+        / by_name["--group, local pool of 2 (--threads 2)"]["seconds"],
+        "dask 2 workers / 1 worker on one core": by_name[
+            "--group, 1 worker pinned to one core (taskset -c 0)"]["seconds"]
+        / by_name["--group --dask local:2"]["seconds"]}
     for name, ratio in ratios.items():
         print(f"throughput {name}: {ratio:.2f}x (target >= 1.6x)")
     document = {"cpus": os.cpu_count(), "sets": args.sets, "frames": args.frames,
