@@ -5,7 +5,8 @@ loads them in milliseconds. The first run of a job can spend most of its time co
 so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
 (:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile the kernels the
-job needs later (the merge's, the preview's tone mapping) while this
+job needs later (the merge's, alignment's and deghosting's, the preview's tone mapping)
+while this
 one reads the brackets and solves the response; it waits for them before those stages
 and then loads those kernels from the cache.
 """
@@ -20,6 +21,8 @@ from collections.abc import Callable
 STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
+    "motion": ("hdrio.align.quick:_read", "hdrio.align.pyramid:_base_rows",
+               "hdrio.align.deghost:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }
 """The kernel whose cache stands for each stage's (they compile together)."""
@@ -58,17 +61,31 @@ _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
 
 
-def compile_ahead(preview: str | None, merge: Callable[[], bool]) -> None:
+def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool = False
+                  ) -> None:
     """On a first run, start processes (:mod:`hdrio.precompile`) compiling kernels into
     the disk cache: the merge kernel of 8-bit RGB brackets when ``merge()`` (asked only
-    when that kernel is not cached); the ``preview`` operator's (a ``TONEMAP_METHODS``
-    name, or None). Nothing when they are cached already or this process may use one CPU
-    only. :func:`announce` of a stage waits for its process first."""
+    when a kernel is not cached), and with ``motion`` alignment's still check and
+    deghosting's test of such brackets, in a process of their own (the longest compile
+    of a first run: 14 s of CPU); the ``preview`` operator's (a ``TONEMAP_METHODS`` name,
+    or None). Nothing when they are cached already or this process may use one CPU only.
+    :func:`announce` of a stage waits for its process first."""
     from hdrio.parallel import threads
 
     if threads() < 2:
         return
-    jobs = {("merge",): ["merge"] if not is_stage_cached("merge") and merge() else [],
+    eight_bit = None
+
+    def needed(stage: str) -> bool:
+        nonlocal eight_bit
+        if is_stage_cached(stage):
+            return False
+        if eight_bit is None:
+            eight_bit = merge()
+        return eight_bit
+
+    jobs = {("merge",): ["merge"] if needed("merge") else [],
+            ("motion",): ["motion"] if motion and needed("motion") else [],
             ("preview",): (
                 [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])}
     for stages, names in jobs.items():

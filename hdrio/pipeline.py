@@ -250,6 +250,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         stack, response, exposure_check = exposures_from_data(
             stack, response, options.exposures_from_data, resolve_exposures)
     clock.lap("response")
+    if options.align != "off" or options.deghost != "off":
+        jit.announce(say, "motion")
     if options.align != "off":
         say(f"aligning {stack.count} brackets ({options.align})")
     resolve = solve if excluded is None else None
@@ -623,7 +625,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     tonemapped = (preview is not None and display_view is None
                   and not TONEMAP_METHODS.canonical(tonemap).endswith("tutorial"))
     if compile_ahead:
-        jit.compile_ahead(tonemap if tonemapped else None, merge=lambda: _eight_bit_rgb(paths))
+        jit.compile_ahead(tonemap if tonemapped else None, merge=lambda: _eight_bit_rgb(paths),
+                          motion=options.align != "off" or options.deghost != "off")
     result = merge_paths(paths, exposures=exposures, exposures_from=exposures_from,
                          options=options, progress=progress, read_progress=read_progress)
     start = time.perf_counter()

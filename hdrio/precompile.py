@@ -25,6 +25,20 @@ def _compile_merge() -> None:
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
 
 
+def _compile_motion() -> None:
+    """Alignment's still check and deghosting's test of 8-bit RGB brackets, through the
+    pipeline's own steps on a small still stack (what ``auto`` runs on most stacks)."""
+    from hdrio.align.stage import align_step, deghost_step
+    from hdrio.stack import ExposureStack
+    from hdrio.synthetic import demo_scene, gamma_inverse_response, render_brackets
+
+    times = [1 / 256, 1 / 16, 1.0]
+    stack = ExposureStack.from_arrays(render_brackets(demo_scene(96, 128), times), times)
+    response = gamma_inverse_response()[0]
+    stack, response, motion = align_step(stack, response, "auto", None)
+    deghost_step(stack, response, motion, "auto", None)
+
+
 def _compile_preview(operator: str) -> None:
     from hdrio.pipeline import render_preview
 
@@ -32,13 +46,15 @@ def _compile_preview(operator: str) -> None:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.precompile merge preview=OPERATOR``: compile those kernels
+    """``python -m hdrio.precompile merge motion preview=OPERATOR``: compile those kernels
     (and stop when the process that started this one stops)."""
     die_with_parent(os.getppid())
     for stage in argv:
         name, _, value = stage.partition("=")
         if name == "merge":
             _compile_merge()
+        elif name == "motion":
+            _compile_motion()
         elif name == "preview":
             _compile_preview(value)
     return 0

@@ -22,12 +22,12 @@ def _run(code_or_module: list[str], cache: str) -> str:
 
 def test_compile_ahead_fills_the_cache_the_job_reads(tmp_path):
     cache = str(tmp_path / "numba-cache")
-    stages = ["merge", "preview"]
-    assert _run(["-c", _CACHED, *stages], cache) == "merge=False preview=False"
-    _run(["-m", "hdrio.precompile", "merge", "preview=reinhard-global"], cache)
-    # A new process finds every kernel of those stages in the cache: the job's merge
-    # and preview load them instead of compiling.
-    assert _run(["-c", _CACHED, *stages], cache) == "merge=True preview=True"
+    stages = ["merge", "motion", "preview"]
+    assert _run(["-c", _CACHED, *stages], cache) == "merge=False motion=False preview=False"
+    _run(["-m", "hdrio.precompile", "merge", "motion", "preview=reinhard-global"], cache)
+    # A new process finds every kernel of those stages in the cache: the job's merge,
+    # alignment, deghosting and preview load them instead of compiling.
+    assert _run(["-c", _CACHED, *stages], cache) == "merge=True motion=True preview=True"
 
 
 def test_a_first_merge_says_it_compiles_only_what_is_not_cached(tmp_path, brackets):
@@ -37,11 +37,11 @@ def test_a_first_merge_says_it_compiles_only_what_is_not_cached(tmp_path, bracke
                str(tmp_path / "out.exr"), "--preview", str(tmp_path / "out.jpg")]
     first = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert first.returncode == 0, first.stderr
-    # The response compiles here; the merge and preview kernels were compiled meanwhile
-    # by the helper processes, so the job loads them and says nothing of them (the
-    # report's check is NumPy: nothing to compile).
+    # The response compiles here; the merge, alignment and deghosting, and preview
+    # kernels were compiled meanwhile by the helper processes, so the job loads them and
+    # says nothing of them (the report's check is NumPy: nothing to compile).
     assert "compiling kernels (first run only): response" in first.stderr
-    for stage in ("merge", "preview"):
+    for stage in ("merge", "motion", "preview"):
         assert f"compiling kernels (first run only): {stage}" not in first.stderr
     second = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert second.returncode == 0 and "compiling kernels" not in second.stderr
