@@ -190,12 +190,13 @@ def _count_chunk(red, green, blue, weights, to_gamut, partial, bins) -> None:
     primaries without ``to_gamut``) is below -1e-6 of ``|Y|``.
     """
     with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: non-finite, counted
-        _count_finite_chunk(*(np.asarray(plane, dtype=np.float32)
-                              for plane in (red, green, blue)),
-                            weights, to_gamut, partial, bins)
+        _count_float32_chunk(*(np.asarray(plane, dtype=np.float32)
+                               for plane in (red, green, blue)),
+                             weights, to_gamut, partial, bins)
 
 
-def _count_finite_chunk(r, g, b, weights, to_gamut, partial, bins) -> None:
+def _count_float32_chunk(r, g, b, weights, to_gamut, partial, bins) -> None:
+    """:func:`_count_chunk` of float32 planes."""
     Y = r * weights[0]
     Y += g * weights[1]
     Y += b * weights[2]
