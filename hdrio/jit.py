@@ -6,9 +6,8 @@ so the pipeline announces it: "compiling kernels (first run only)". numba compil
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
 (:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile the kernels the
 job needs later (the merge's, alignment's and deghosting's, the preview's tone mapping)
-while this
-one reads the brackets and solves the response; it waits for them before those stages
-and then loads those kernels from the cache.
+while this one reads the brackets and solves the response; it waits for them before
+those stages and then loads those kernels from the cache.
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ STAGES: dict[str, tuple[str, ...]] = {
                "hdrio.align.deghost:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }
-"""The kernel whose cache stands for each stage's (they compile together)."""
+"""The kernels whose cache stands for each stage's (they compile together)."""
 
 
 def _dispatcher(name: str):
@@ -74,18 +73,12 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
 
     if threads() < 2:
         return
-    eight_bit = None
-
-    def needed(stage: str) -> bool:
-        nonlocal eight_bit
-        if is_stage_cached(stage):
-            return False
-        if eight_bit is None:
-            eight_bit = merge()
-        return eight_bit
-
-    jobs = {("merge",): ["merge"] if needed("merge") else [],
-            ("motion",): ["motion"] if motion and needed("motion") else [],
+    uncached = [stage for stage in ("merge", "motion")
+                if (motion or stage == "merge") and not is_stage_cached(stage)]
+    if uncached and not merge():  # their kernels are compiled for 8-bit RGB brackets
+        uncached = []
+    jobs = {("merge",): ["merge"] if "merge" in uncached else [],
+            ("motion",): ["motion"] if "motion" in uncached else [],
             ("preview",): (
                 [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])}
     for stages, names in jobs.items():

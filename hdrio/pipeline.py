@@ -180,11 +180,12 @@ def describe_set(stack: ExposureStack) -> str:
     return f"{span} ({'; '.join(notes)})"
 
 
-def exclusions(stack: ExposureStack, options: MergeOptions) -> np.ndarray | None:
-    """``(P, H, W)`` bool: the observations ``--exclude-color`` and ``--mask`` keep out
-    of the solve and the merge (:mod:`hdrio.merge.exclusion`), else ``None``."""
-    return either(colour_exclusion(stack.codes, options.exclude_colour),
-                  read_masks(options.masks, stack.files, stack.shape[:2]))
+def exclusions(stack: ExposureStack, options: MergeOptions,
+               masks: np.ndarray | None) -> np.ndarray | None:
+    """``(P, H, W)`` bool: the observations ``--exclude-color`` and ``--mask`` (``masks``,
+    read by :func:`hdrio.io.masks.read_masks` in the stack's order) keep out of the solve
+    and the merge (:mod:`hdrio.merge.exclusion`), else ``None``."""
+    return either(colour_exclusion(stack.codes, options.exclude_colour), masks)
 
 
 def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
@@ -206,11 +207,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     clock = PhaseClock()
     timings = clock.wall
     solve = None
-    excluded = exclusions(stack, options)
     filtered = None  # stops of ND filter per bracket
     if options.nd:
         stack, filtered = with_nd(stack, nd_stops(stack.files, options.nd))
-        excluded = exclusions(stack, options)  # in the new order
+    masks = read_masks(options.masks, stack.files, stack.shape[:2])  # in the stack's order
+    excluded = exclusions(stack, options, masks)
     if response is not None:
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
@@ -258,7 +259,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     stack, response, motion = align_step(stack, response, options.align, resolve,
                                          in_place=owned, skip_warp="warp" in skips)
     if motion.warped and excluded is not None:  # the warped borders' colour
-        excluded = exclusions(stack, options)
+        excluded = exclusions(stack, options, masks)
     nd_report = None
     if filtered is not None:
         gains, found = filter_gains(stack, response, filtered)
@@ -614,9 +615,9 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     ``display_view``: render the preview through that OCIO display and view instead of
     the ``tonemap`` operator (with ``tonemap_parameters``). ``observe`` sees each band of
     the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`). ``compile_ahead``:
-    on a first run, compile the preview's and the check's kernels in a second process
-    meanwhile (:func:`hdrio.jit.compile_ahead`; for a command run as ``python``, not
-    from inside another application).
+    on a first run, compile the merge's, alignment's and deghosting's and the preview's
+    kernels in helper processes meanwhile (:func:`hdrio.jit.compile_ahead`; for a command
+    run as ``python``, not from inside another application).
     """
     say = progress or (lambda message: None)
     # Fail before reading: outputs named well, in folders that take a new file.

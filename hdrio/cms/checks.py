@@ -120,8 +120,6 @@ def check_pixels(rgb: np.ndarray, chromaticities: tuple[float, ...] = REC709_D65
     ``gamut``: a colour-science RGB space name to count pixels outside of (converted
     with Bradford adaptation); default the pixels' own space (then: any channel < 0).
     """
-    import colour
-
     rgb = np.asarray(rgb, dtype=np.float64)
     if rgb.ndim != 3 or rgb.shape[-1] != 3:
         raise HdrioError(f"checks need RGB pixels, got shape {rgb.shape}")
@@ -133,16 +131,9 @@ def check_pixels(rgb: np.ndarray, chromaticities: tuple[float, ...] = REC709_D65
     percentiles = dict(zip(("p1", "median", "p99"),
                            (float(v) for v in np.percentile(values, [1, 50, 99])))) \
         if values.size else {}
-    if gamut is None:
-        target, gamut_name = rgb, "own primaries"
-    else:
-        space = colour.RGB_COLOURSPACES[gamut]
-        target = rgb @ (space.matrix_XYZ_to_RGB @ colour.adaptation.
-                        matrix_chromatic_adaptation_VonKries(
-                            colour.xy_to_XYZ(np.asarray(chromaticities[6:8])),
-                            colour.xy_to_XYZ(space.whitepoint), transform="Bradford")
-                        @ to_xyz).T
-        gamut_name = gamut
+    to_gamut = _gamut_matrix(chromaticities, gamut)
+    target = rgb if to_gamut is None else rgb @ to_gamut.T
+    gamut_name = "own primaries" if gamut is None else gamut
     # Outside: a channel below -1e-6 of the pixel's luminance (float rounding is not).
     outside = np.any(target < -1e-6 * np.abs(Y)[..., None], axis=-1) & finite
     return CheckReport(

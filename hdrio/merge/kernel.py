@@ -193,7 +193,7 @@ def pair_tables(terms: np.ndarray, limits: np.ndarray) -> np.ndarray:
     terms = np.asarray(terms, dtype=np.complex128)
     count, channels, levels = terms.shape
     tables = np.zeros((count, channels, PAIR_LEVELS, PAIR_LEVELS), np.complex64)
-    tables[0, :, :levels, 0] = terms[0] * (np.asarray(limits) > 0)[:, None]
+    tables[0, :, :levels, 0] = terms[0]  # the zero row's code is never dropped (limit >= 1)
     if count > 1:
         # Bracket j's term counts unless the shorter bracket's code y is dropped.
         keep = np.arange(levels)[None, :] < np.asarray(limits)[:, None]  # (C, levels)
