@@ -19,7 +19,7 @@ import numpy as np
 from hdrio.cms.calibration import Region
 from hdrio.cms.luminance import normalised_primary_matrix
 from hdrio.errors import HdrioError, InputError
-from hdrio.parallel import on_threads
+from hdrio.parallel import on_threads, threads
 
 REC709_D65 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLORCHECKER = "ColorChecker24 - After November 2014"
@@ -334,7 +334,7 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     :class:`StreamingCheck`, counting on every core.
 
     The pixels are decoded by OpenEXR (half the CPU time of OpenImageIO's reader for a
-    ZIP-compressed half image) as whole planes, as stored: a 24 MP half RGB image holds
+    ZIP-compressed half image), on every core, as whole planes, as stored: a 24 MP half RGB image holds
     144 MB, plus the uncertainty layer's plane when there is one.
     """
     import OpenEXR
@@ -343,6 +343,8 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     from hdrio.io.native import quiet_native_output
 
     header = read_header(path)
+    # OpenEXR's own threads decompress the line blocks (24 MP: 0.45 s on one, 0.21 s on two).
+    OpenEXR.set_global_thread_count(threads())
     try:
         # OpenEXR prints what it found broken and returns no parts: one line of ours.
         with quiet_native_output(), OpenEXR.File(str(path), separate_channels=True) as exr:
