@@ -334,8 +334,8 @@ def check_exr(path: str | Path, *, chart: Region | None = None, gamut: str | Non
     :class:`StreamingCheck`, counting on every core.
 
     The pixels are decoded by OpenEXR (half the CPU time of OpenImageIO's reader for a
-    ZIP-compressed half image), on every core, as whole planes, as stored: a 24 MP half RGB image holds
-    144 MB, plus the uncertainty layer's plane when there is one.
+    ZIP-compressed half image), on every core, as whole planes, as stored: a 24 MP half
+    RGB image holds 144 MB, plus the uncertainty layer's plane when there is one.
     """
     import OpenEXR
 
