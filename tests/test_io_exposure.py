@@ -29,6 +29,8 @@ from hdrio.io.exposure import (
         ("0.5", 0.5),
         ("30", 30.0),
         (" 1/8 ", 1 / 8),
+        ("1/3.75", 1 / 3.75),  # what some cameras' EXIF and sidecars print
+        ("2.5/10", 0.25),
         ("1e-3", 0.001),
         (0.25, 0.25),
         (2, 2.0),
@@ -40,7 +42,7 @@ def test_parse_exposure_accepts_fractions_decimals_and_numbers(text, seconds):
 
 @pytest.mark.parametrize(
     "text",
-    ["", "abc", "1/", "/60", "1//60", "1/60s", "1,5", "inf", "nan", "1/0",
+    ["", "abc", "1/", "/60", "1//60", "1/2/3", "1/inf", "1/nan", "1/60s", "1,5", "inf", "nan", "1/0",
      "0", "0/1", "0.0", "-1/60", "-2", -0.5, 0, 0.0, float("inf"), float("nan")],
 )
 def test_parse_exposure_rejects_bad_zero_and_negative_values(text):

@@ -29,9 +29,17 @@ _INTEGER = re.compile(r"\d+")
 
 
 def parse_exposure(text: str | float) -> float:
-    """Parse ``"1/60"``, ``"0.5"``, ``"30"`` or a number into seconds (a positive float)."""
+    """Parse ``"1/60"``, ``"1/3.75"``, ``"0.5"``, ``"30"`` or a number into seconds (a
+    positive float); either side of a ``/`` may be a decimal."""
     try:
-        value = float(text) if isinstance(text, int | float) else float(Fraction(text.strip()))
+        if isinstance(text, int | float):
+            value = float(text)
+        else:
+            parts = text.strip().split("/")
+            if len(parts) > 2:
+                raise ValueError
+            value = float(Fraction(parts[0].strip()) / Fraction(parts[-1].strip())
+                          if len(parts) == 2 else Fraction(parts[0].strip()))
     except (ValueError, ZeroDivisionError, OverflowError):
         raise ValueError(f"not an exposure time: {text!r}") from None
     if not value > 0 or value == float("inf"):
