@@ -15,6 +15,7 @@ import numpy as np
 
 from hdrio import __version__, jit
 from hdrio.align.deghost import CELL
+from hdrio.align.registration import align_masks
 from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
@@ -24,7 +25,7 @@ from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output
 from hdrio.errors import HdrioError, ResponseSolveError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.brackets import read_header as read_bracket_header
-from hdrio.io.masks import read_masks
+from hdrio.io.masks import mask_files, read_masks
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw, is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
@@ -259,6 +260,10 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     stack, response, motion = align_step(stack, response, options.align, resolve,
                                          in_place=owned, skip_warp="warp" in skips)
     if motion.warped and excluded is not None:  # the warped borders' colour
+        if masks is not None and len(set(mask_files(options.masks, stack.files))) > 1:
+            # A mask per bracket is drawn on that bracket: it moves with it. One shared
+            # mask is taken on the reference, where every bracket now is.
+            masks = align_masks(masks, motion.alignment)
         excluded = exclusions(stack, options, masks)
     nd_report = None
     if filtered is not None:

@@ -4,6 +4,7 @@ counted apart where excluded everywhere."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -138,3 +139,55 @@ def test_memorial_registration_border_is_not_merged(shared_data):
     assert blue.mean() < 0.005, blue.mean()  # the issue's bound; measured 0.000 %
     assert result.statistics.clipped_fraction < 0.005  # measured 0.00 %
     assert result.unseen is None  # every border pixel is seen by some bracket
+
+
+def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
+    """Hand-held: the longest bracket is shifted by (7, 5) px and a block of it is spoilt
+    and masked in its own frame. With --align the mask must be warped with the bracket:
+    the block, seen at its place on the reference, merges as the clean stack with the
+    same masks does. (Left where it was drawn, the mask lets the garbage in.)"""
+    from hdrio.synthetic import demo_scene, render_brackets
+
+    times = (1 / 16, 1 / 4, 1.0)
+    scene = demo_scene(160, 224, seed=3) * 2.0
+    codes = render_brackets(scene, times)
+    codes[2] = np.roll(codes[2], (5, 7), axis=(0, 1))  # the camera moved for the last
+    names = ("b_1_16.png", "b_1_4.png", "b_1_1.png")  # exposures from the names
+
+    def write(folder: Path, stack: np.ndarray) -> list[Path]:
+        folder.mkdir()
+        paths = [folder / name for name in names]
+        for path, bracket in zip(paths, stack, strict=True):
+            buffer = oiio.ImageBuf(oiio.ImageSpec(bracket.shape[1], bracket.shape[0], 3,
+                                                  oiio.UINT8))
+            buffer.set_pixels(oiio.ROI(), np.ascontiguousarray(bracket))
+            assert buffer.write(str(path))
+        return paths
+
+    own = (slice(60, 84), slice(90, 130))  # in the shifted bracket's own frame
+    masks = []
+    for j, name in enumerate(names):
+        values = np.full(codes.shape[1:3], 255, np.uint8)
+        if j == 2:
+            values[own] = 0
+        masks.append(tmp_path / "masks" / name)
+        _write_grey(masks[-1], values)
+    aligned = MergeOptions(align="euclidean", deghost="off", masks=tuple(map(str, masks)))
+    # The same masks on the clean stack: what the merge is without that bracket there.
+    clean = merge_paths(write(tmp_path / "clean", codes), options=aligned).radiance
+    spoilt = codes.copy()
+    spoilt[2][own] = (0, 0, 255)
+    result = merge_paths(write(tmp_path / "spoilt", spoilt), options=aligned)
+    centre = np.array([110.0, 72.0, 1.0])  # the block's centre on the reference (x, y)
+    moved = result.motion.alignment.transforms[2] @ centre - centre
+    # What the roll did (x, y), within the registration's error on this small stack
+    # (its garbage block in, the wrapped border: measured 0.16 px).
+    assert np.allclose(moved[:2], (7, 5), atol=0.5), moved
+    on_reference = (slice(60 - 5, 84 - 5), slice(90 - 7, 130 - 7))
+    ratio = result.radiance[on_reference] / clean[on_reference]
+    error = np.abs(ratio - 1)
+    # The garbage is out: the block merges as the clean stack with the same masks, up to
+    # the registration's own difference (the garbage is in what it measures). Measured:
+    # p90 0.2 %, max 5.8 %; with the mask left where it was drawn, p90 16 %, max 142 %.
+    assert np.percentile(error, 90) < 0.02 and error.max() < 0.15, \
+        np.percentile(error, [50, 90, 100])

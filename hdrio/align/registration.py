@@ -309,6 +309,23 @@ def align_stack(stack: ExposureStack, alignment: Alignment,
     return replace(stack, codes=codes)
 
 
+def align_masks(masks: np.ndarray, alignment: Alignment) -> np.ndarray:
+    """Per-bracket exclusion masks ``(P, H, W)`` bool, each in its own bracket's frame,
+    moved onto the reference as :func:`align_stack` moves the codes: the nearest pixel,
+    grown by 2 pixels, the reach of the cubic interpolation (a warped code within it
+    took some of an excluded one)."""
+    import scipy.ndimage
+
+    out = masks.copy()
+    for j in range(masks.shape[0]):
+        if j == alignment.reference or alignment.motion[j] == 0.0:
+            continue
+        mask = np.ascontiguousarray(masks[j, ..., None], dtype=np.uint8)
+        warped = warp_codes(mask, alignment.transforms[j], 1, interpolate=False)[..., 0]
+        out[j] = scipy.ndimage.maximum_filter(warped, size=5) > 0
+    return out
+
+
 EDGE_CODES = 24.0
 """Pixels whose 3x3 neighbourhood spans more than this (8-bit codes, mean of channels)
 in some bracket are not sampled for the re-solve: resampled brackets differ from the

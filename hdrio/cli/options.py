@@ -195,7 +195,8 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            help="keep a mask's black pixels (below half range) out of the solve and the "
                 "merge, as --exclude-color does: one file for every bracket, the option "
                 "repeated once per bracket in their order, or a name with {stem} (each "
-                "bracket's file stem: masks/{stem}.png)"),
+                "bracket's file stem: masks/{stem}.png); a bracket's own mask moves with "
+                "it when --align warps it, a shared one is on the reference bracket"),
     Option("--seed", ("N",), "seed", whole, example=("7",), help="sampling seed (default 0)"),
     Option("--no-skip", ("NAME",), "no_skip", skip_name, example=("all",), repeat=True,
            help="turn off one of the work skips (repeatable): brackets, covered, response, "
