@@ -4,7 +4,6 @@ counted apart where excluded everywhere."""
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
