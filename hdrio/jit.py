@@ -56,6 +56,10 @@ def announce(say: Callable[[str], None], stage: str) -> None:
             "cache")
 
 
+_LATER_NICENESS = (0, 4, 8)
+"""Niceness of the compile-ahead processes for motion, merge and preview (CFS gives a
+process of niceness 4 about 40 % of a nice-0 one's share)."""
+
 _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
 
@@ -77,13 +81,17 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
                 if (motion or stage == "merge") and not is_stage_cached(stage)]
     if uncached and not merge():  # their kernels are compiled for 8-bit RGB brackets
         uncached = []
-    jobs = {("merge",): ["merge"] if "merge" in uncached else [],
-            ("motion",): ["motion"] if "motion" in uncached else [],
+    # In the order the job needs them, each later one at a lower priority: on 2 cores
+    # the first run is CPU-bound, and the stage the job waits for next should not share
+    # its core with one it needs seconds later.
+    jobs = {("motion",): ["motion"] if "motion" in uncached else [],
+            ("merge",): ["merge"] if "merge" in uncached else [],
             ("preview",): (
                 [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])}
-    for stages, names in jobs.items():
+    for niceness, (stages, names) in zip(_LATER_NICENESS, jobs.items(), strict=True):
         if names:
-            process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile", *names],
+            process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile",
+                                        f"nice={niceness}", *names],
                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                        stderr=subprocess.DEVNULL)
             _pending.update(dict.fromkeys(stages, process))

@@ -46,12 +46,15 @@ def _compile_preview(operator: str) -> None:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.precompile merge motion preview=OPERATOR``: compile those kernels
-    (and stop when the process that started this one stops)."""
+    """``python -m hdrio.precompile [nice=N] merge motion preview=OPERATOR``: compile
+    those kernels (at niceness ``N`` when given; and stop when the process that started
+    this one stops)."""
     die_with_parent(os.getppid())
     for stage in argv:
         name, _, value = stage.partition("=")
-        if name == "merge":
+        if name == "nice":  # the job needs this stage later than others: yield to them
+            os.nice(int(value))
+        elif name == "merge":
             _compile_merge()
         elif name == "motion":
             _compile_motion()
