@@ -4,9 +4,11 @@ Each bracket's estimate ``x_j(z) = f^-1(z) / dt_j`` (relative radiance) is teste
 the reference bracket's, per channel, with the variance of both estimates (the noise
 model's table, ``(P, C, levels)``, relative radiance squared):
 ``d^2 = (x_j - x_r)^2 / (var_j + var_r)``, which is about 1 on average for a still scene.
-Where the reference is clipped or black in a channel, the nearest bracket towards ``j``
-that is not takes over as the reference there (so a bright window is tested against
-the shorter brackets, a dark corner against the longer ones).
+Where the reference is clipped in a channel, the nearest bracket towards ``j`` that is
+not takes over as the reference there (so a bright window is tested against the shorter
+brackets). Where it is black, it bounds the radiance from above, and the nearest bracket
+within that bound takes over (a dark corner is tested against the longer brackets; dark
+clothes in front of a brighter floor are not replaced by the floor).
 
 The test is made per *cell* of :data:`CELL` x :data:`CELL` pixels on every
 :data:`STRIDE`-th pixel each way (the mean of the capped ``d^2`` of its samples: noise
@@ -124,9 +126,9 @@ def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - com
 
 
 @njit(cache=True, nogil=True)
-def _consistency(start, stop, codes, estimates, variance, reference, cell, stride, cap,
-                 resampled, black, high, suspect, todo, sums, counts,
-                 takeovers):  # pragma: no cover - compiled
+def _consistency(start, stop, codes, estimates, variance, dark_bound, dark_variance,
+                 reference, cell, stride, cap, resampled, black, high, suspect, todo, sums,
+                 counts, takeovers):  # pragma: no cover - compiled
     """Per bracket and cell (those ``todo``, in cell rows ``start .. stop - 1``), the sum
     and count of the capped ``d^2`` of its samples.
 
@@ -141,6 +143,14 @@ def _consistency(start, stop, codes, estimates, variance, reference, cell, strid
     white balance of a clipped channel, JPEG's ringing and half-resolution chroma),
     and that is not motion. (Asked only of suspect samples: a few per cent of them.)
 
+    Where the reference is below its usable codes in a channel it still says something:
+    the radiance is at most ``dark_bound`` (its first usable code's estimate, with that
+    code's ``dark_variance``; :func:`dark_bounds`). A bracket is tested against that
+    bound, and the first one within it takes over as the reference there. (Dark clothes
+    under a dark reference: the brighter background a shorter or longer bracket shows
+    there is a ghost; taken over untested it merged channel by channel with the
+    reference's, in coloured speckle.)
+
     A row of samples is gathered from every bracket first, bracket by bracket along the
     row (loads only: the reads miss the cache, and the prefetcher follows a stride), then
     tested; reading every bracket at each sample in turn waited on memory at each."""
@@ -153,6 +163,8 @@ def _consistency(start, stop, codes, estimates, variance, reference, cell, strid
     high_e = np.empty(channels)
     chain_var = np.empty(channels)
     chain = np.empty(channels, np.int64)
+    start_bounded = np.empty(channels, np.bool_)
+    bounded = np.empty(channels, np.bool_)  # the chain's value is the dark bound
     known = np.empty(count, np.int8)
     gathered = np.empty((cols * (cell // stride + 1), count, channels), codes.dtype)
     for cy in range(start, stop):
@@ -177,12 +189,18 @@ def _consistency(start, stop, codes, estimates, variance, reference, cell, strid
                     for c in range(channels):
                         z = sample[reference, c]
                         start_var[c] = variance[reference, c, z]
+                        start_bounded[c] = False
                         if np.isfinite(start_var[c]):
                             if resampled:
                                 start_low[c], start_high[c] = _local_range(
                                     codes, estimates, variance, reference, y, x, c)
                             else:
                                 start_low[c] = start_high[c] = estimates[reference, c, z]
+                        elif np.isfinite(dark_variance[reference, c, z]):
+                            start_var[c] = dark_variance[reference, c, z]
+                            start_bounded[c] = True
+                            start_low[c] = -np.inf
+                            start_high[c] = dark_bound[reference, c, z]
                     for direction in (-1, 1):
                         # Element by element: `low[:] = start_low` would compile numba's
                         # shape-mismatch message (string formatting: 2.8 s of a first run).
@@ -191,6 +209,7 @@ def _consistency(start, stop, codes, estimates, variance, reference, cell, strid
                             high_e[c] = start_high[c]
                             chain_var[c] = start_var[c]
                             chain[c] = reference
+                            bounded[c] = start_bounded[c]
                         j = reference + direction
                         while 0 <= j < count:
                             total = 0.0
@@ -204,14 +223,25 @@ def _consistency(start, stop, codes, estimates, variance, reference, cell, strid
                                 if np.isfinite(chain_var[c]):
                                     d = max(0.0, e - high_e[c], low[c] - e)
                                     d2 = d * d / (v + chain_var[c])
+                                    # (A bound's bracket is black there by definition.)
                                     if d2 > suspect and (
                                             _near(codes, j, y, x, black, high, CLIP_RADIUS,
                                                   known)
-                                            or _near(codes, chain[c], y, x, black, high,
-                                                     CLIP_RADIUS, known)):
+                                            or not bounded[c] and _near(
+                                                codes, chain[c], y, x, black, high,
+                                                CLIP_RADIUS, known)):
                                         continue  # next to clipping: says nothing
                                     total += min(d2, cap)
                                     used += 1
+                                    if bounded[c] and d2 <= suspect:  # within: j takes over
+                                        chain_var[c] = v
+                                        chain[c] = j
+                                        bounded[c] = False
+                                        if resampled:
+                                            low[c], high_e[c] = _local_range(
+                                                codes, estimates, variance, j, y, x, c)
+                                        else:
+                                            low[c] = high_e[c] = e
                                     continue
                                 # The reference is clipped or black here: j takes over.
                                 chain_var[c] = v
@@ -334,6 +364,22 @@ class Deghosting:
         return np.clip(out, 0.0, 1.0)
 
 
+def dark_bounds(estimates: np.ndarray, variance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(bound, bound_variance)``, ``(P, C, levels)``: for each code below a bracket's
+    usable codes (``variance`` infinite there), the estimate and variance of its first
+    usable code, which bounds the radiance from above; ``nan`` and ``inf`` elsewhere."""
+    bound = np.full(variance.shape, np.nan)
+    bound_variance = np.full(variance.shape, np.inf)
+    usable = np.isfinite(variance)
+    for j in range(variance.shape[0]):
+        for c in range(variance.shape[1]):
+            first = np.flatnonzero(usable[j, c])
+            if first.size:
+                bound[j, c, :first[0]] = estimates[j, c, first[0]]
+                bound_variance[j, c, :first[0]] = variance[j, c, first[0]]
+    return bound, bound_variance
+
+
 def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, reference: int,
             coverage: np.ndarray | None = None, cell: int = CELL,
             threshold: float = THRESHOLD, resampled: bool = True) -> Deghosting:
@@ -360,6 +406,7 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     rows, cols = -(-height // cell), -(-width // cell)
     variance = np.ascontiguousarray(variance, np.float64)
     estimates = comparametric_correction(codes, estimates, variance, reference)
+    dark_bound, dark_variance = dark_bounds(estimates, variance)
     code_max = int(variance.shape[2]) - 1  # the tables have a row per code value
     _, high = well_exposed_codes(code_max)
     black = int(BLACK * code_max)
@@ -377,8 +424,9 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
             last = min(rows_of_cells, first + band)
             on_threads(lambda start, stop, *rest, first=first: _consistency(
                 first + start, first + stop, *rest),
-                       last - first, codes, estimates, variance, reference, size, stride,
-                       CAP, resampled, black, high, SUSPECT, todo, sums, counts, takeovers)
+                       last - first, codes, estimates, variance, dark_bound, dark_variance,
+                       reference, size, stride, CAP, resampled, black, high, SUSPECT, todo,
+                       sums, counts, takeovers)
             release(codes, None, 0, min(height, last * size))
         return sums / np.maximum(counts, 1), counts, takeovers
 
