@@ -4,6 +4,7 @@ EXIF exposure is off is named, and the data's estimate recovers it."""
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -281,3 +282,45 @@ def test_group_without_metadata_needs_a_group_size(shared_data, tmp_path, capsys
                        "--merge", "-o", pattern)
     assert code == 0, err
     assert sorted(p.name for p in tmp_path.glob("*.exr")) == ["IMG_100.exr", "IMG_105.exr"]
+
+
+def _stripped(files, folder) -> list:
+    """The brackets' pixels as PNGs with no metadata (EXIF gone), same stems."""
+    from hdrio.io.brackets import read_codes
+
+    return [write_image(folder / f"{f.stem}.png", read_codes(f)[0], "uint8") for f in files]
+
+
+def test_real_sets_stripped_of_metadata(shared_data, tmp_path):
+    """Real sets with their metadata stripped. hdrtoolbox 'alignment' (3 hand-held JPEGs,
+    EXIF 2 stops apart): step inferred 2 stops, each exposure within 0.05 stop of EXIF's
+    (measured 0.022). Memorial Church (16 film scans, nominal 1 stop): step 1 stop, and
+    the neighbouring ratios are the ones the data give when the exposure list is read
+    (measured equal to 3 decimals; they scatter 0.94-1.09 stops about the nominal).
+    Not asserted, reported in docs/method.md: the Canon JPEGs of frobisher (3 stops) and
+    'ghost' (2 stops) come out 3 2/3 and 2 2/3, the camera's curve steeper than sRGB's."""
+    from hdrio.io.brackets import read_brackets
+    from hdrio.pipeline import merge_paths
+
+    folder = shared_data("hdrtoolbox_stacks") / "alignment"
+    files = sorted(folder.glob("*.jpg"))
+    exif = read_brackets(files).exposures
+    (tmp_path / "a").mkdir()
+    result = merge_paths(_stripped(files, tmp_path / "a")[::-1],
+                         options=MergeOptions(exposures_from_data=True, deghost="off"))
+    assert result.exposures.inferred == "step inferred: 2 stops"
+    error = np.log2(result.stack.exposures / (exif / exif[1]))
+    assert np.abs(error).max() < 0.05, error
+
+    folder = shared_data("memorial_debevec")
+    files = sorted(folder.glob("*.png"))
+    options = MergeOptions(exposures_from_data=True, exclude_colour=(0, 0, 255),
+                           align="off", deghost="off")
+    listed = merge_paths(files, exposures_from=folder / "exposures.csv", options=options)
+    (tmp_path / "m").mkdir()
+    inferred = merge_paths(_stripped(files, tmp_path / "m"), options=options)
+    assert inferred.exposures.inferred == "step inferred: 1 stop"
+    assert [Path(f).stem for f in inferred.stack.files] == [
+        Path(f).stem for f in listed.stack.files]
+    np.testing.assert_allclose(np.diff(np.log2(inferred.stack.exposures)),
+                               np.diff(np.log2(listed.stack.exposures)), atol=0.01)
