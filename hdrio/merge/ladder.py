@@ -128,8 +128,8 @@ def brightness_order(stack: ExposureStack) -> np.ndarray:
     # Pixels with a channel black and another clipped (registration borders, pure
     # colours) say nothing of the exposure.
     pure = (sample == 0).any(axis=-1) & (sample == stack.code_max).any(axis=-1)
-    levels = np.array([np.percentile(codes[~out], ORDER_LEVELS)
-                       for codes, out in zip(sample, pure)])  # (P, 99)
+    levels = np.array([np.percentile(codes[~out] if not out.all() else codes, ORDER_LEVELS)
+                       for codes, out in zip(sample, pure)])  # (P, levels)
     order = np.argsort(levels.mean(axis=1), kind="stable")
     for darker, brighter in zip(order[:-1], order[1:]):
         difference = levels[brighter] - levels[darker]
