@@ -209,8 +209,9 @@ def _stack_of(codes: np.ndarray, names: list[str]) -> ExposureStack:
 
 
 def test_what_cannot_be_inferred_names_the_file(shared_data):
-    """An all-black bracket, two copies of one exposure, two brackets: one line naming
-    the file (hdrio.errors.InputError, exit 2 from the command)."""
+    """An all-black or all-clipped bracket, two copies of one exposure, two brackets,
+    brackets with no well-exposed pixel in common: one line naming the file
+    (hdrio.errors.InputError, exit 2 from the command)."""
     from hdrio.errors import InputError
 
     shared_data("openexr_scenes")
@@ -226,6 +227,16 @@ def test_what_cannot_be_inferred_names_the_file(shared_data):
         merge_stack(_stack_of(twice, names), OFF_PIPELINE)
     with pytest.raises(InputError, match=r"^b1\.png: no exposure metadata, and two brackets"):
         merge_stack(_stack_of(codes[1:3], names[:2]), OFF_PIPELINE)
+    clipped = codes.copy()
+    clipped[3] = 255
+    with pytest.raises(InputError, match=r"^b3\.png: all clipped \(no well-exposed code\)"):
+        merge_stack(_stack_of(clipped, names), OFF_PIPELINE)
+    # A 24-stop ramp shot 7 stops apart: no pixel is well exposed in two brackets.
+    ramp = np.exp2(np.linspace(-24, 0, 4096))[None, :, None] * np.ones((8, 1, 3))
+    far = render_brackets(ramp, np.exp2([3.0, 10.0, 17.0]), seed=1)
+    with pytest.raises(InputError, match=r"^b1\.png: no well-exposed pixels in common with "
+                                         r"b0\.png"):
+        merge_stack(_stack_of(far, names[:3]), OFF_PIPELINE)
 
 
 def test_cli_infers_a_folder_of_pngs_without_metadata(shared_data, tmp_path, capsys):
