@@ -19,6 +19,7 @@ from hdrio.align.registration import align_masks
 from hdrio.align.stage import Motion, align_step, check_modes, deghost_step, remerge_step
 from hdrio.cms.calibration import Calibration, Region
 from hdrio.cms.checks import dynamic_range_stops
+from hdrio.cms.encoding import resolve_encoding
 from hdrio.cms.luminance import DEFAULT_SPACE, luminance, rgb_chromaticities
 from hdrio.cms.spaces import DEFAULT_WORKING_SPACE, require_scene_linear
 from hdrio.cms.stage import ColourState, colour_attributes, colour_stage, output_radiance
@@ -38,6 +39,12 @@ from hdrio.merge.estimators import (
 )
 from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
 from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.ladder import (
+    in_brightness_order,
+    infer_exposures,
+    needs_inference,
+    starting_response,
+)
 from hdrio.merge.nd import NDFilter, NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.merge.noise import NoiseModel, code_variance_floor, fit_noise
 from hdrio.merge.uncertainty import relative_uncertainty
@@ -211,6 +218,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     filtered = None  # stops of ND filter per bracket
     if options.nd:
         stack, filtered = with_nd(stack, nd_stops(stack.files, options.nd))
+    if needs_inference(stack):  # no exposure metadata: order by brightness, before masks
+        stack = in_brightness_order(stack)
     masks = read_masks(options.masks, stack.files, stack.shape[:2])  # in the stack's order
     excluded = exclusions(stack, options, masks)
     if response is not None:
@@ -232,25 +241,37 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                 **({"solve_identical_once": "channels" in skips} if method != "linear"
                    else {}))
 
-        try:
-            response = solve(stack, None if excluded is None else excluded.any(axis=0))
-        except ResponseSolveError as error:
-            message = str(error).replace("a saved response", "a saved response "
-                                         "(--response-from EXR, from an earlier merge)")
-            if "--response-from" not in message:
-                message += "; or give a saved response: --response-from EXR"
-            raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
-        skipped.channels_solved = response.parameters.get("channels_solved")
+        def solved(stack: ExposureStack) -> CameraResponse:
+            try:
+                return solve(stack, None if excluded is None else excluded.any(axis=0))
+            except ResponseSolveError as error:
+                message = str(error).replace("a saved response", "a saved response "
+                                             "(--response-from EXR, from an earlier merge)")
+                if "--response-from" not in message:
+                    message += "; or give a saved response: --response-from EXR"
+                raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
+
     exposure_check = None
     if options.exposures_from_data and (stack.count < 3 or filtered is not None):
         raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
                          f"(the filters are measured on their own); got {stack.count} "
                          "brackets" + (" and --nd" if filtered is not None else ""))
-    if stack.count > 2 and filtered is None:  # two brackets cannot say which is wrong
-        resolve_exposures = None if solve is None else (lambda stack: solve(
-            stack, None if excluded is None else excluded.any(axis=0)))
+    if needs_inference(stack):  # no metadata: the ladder from the pixels (--exposures-from-data)
+        start = response if response is not None else starting_response(
+            stack.code_max, stack.shape[2], resolve_encoding(
+                stack.files, stack.metadata, options.input_encoding)[0].name,
+            linear=is_raw_stack(stack) or options.response == "linear")
+        stack, response, exposure_check = infer_exposures(
+            stack, start, None if solve is None else solved)
+        say(f"exposures: {exposure_check.line()}")
+    elif solve is not None:
+        response = solved(stack)
+    if solve is not None:
+        skipped.channels_solved = response.parameters.get("channels_solved")
+    if stack.count > 2 and filtered is None and exposure_check is None:
+        # two brackets cannot say which is wrong
         stack, response, exposure_check = exposures_from_data(
-            stack, response, options.exposures_from_data, resolve_exposures)
+            stack, response, options.exposures_from_data, None if solve is None else solved)
     clock.lap("response")
     if options.align != "off" or options.deghost != "off":
         jit.announce(say, "motion")
@@ -531,7 +552,8 @@ def merge_paths(paths: Sequence[str | Path], *,
                           progress=read_progress, white_balance=options.raw_multipliers,
                           skip_brackets="brackets" in options.skips,
                           stop_when_covered=response is not None
-                          and "covered" in options.skips)
+                          and "covered" in options.skips,
+                          infer_exposures=options.exposures_from_data)
     read_time = time.perf_counter() - start
     result = merge_stack(stack, options, progress, response, owned=True)
     if response is not None:

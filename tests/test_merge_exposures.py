@@ -4,6 +4,7 @@ EXIF exposure is off is named, and the data's estimate recovers it."""
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from hdrio.io.write import write_image
 from hdrio.merge.exposures import anchor_Theil_Sen
 from hdrio.pipeline import MergeOptions, merge_stack
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import render_brackets
+from hdrio.synthetic import gamma_response, render_brackets
 from tests.conftest import run_cli as run
 
 OFF = 2 ** (1 / 3)  # one bracket's metadata 1/3 stop long
@@ -93,3 +94,244 @@ def test_exposures_from_data_needs_three_brackets(brackets, tmp_path, capsys):
                        "-o", tmp_path / "o.exr")
     assert code == 2 and "--exposures-from-data needs three brackets or more" in err, err
     assert not (tmp_path / "o.exr").exists()
+
+
+# ------------------------------------------------- no metadata at all (hdrio.merge.ladder)
+
+OFF_PIPELINE = MergeOptions(exposures_from_data=True, align="off", deghost="off")
+
+
+@lru_cache(maxsize=4)
+def _ladder(scene: str, curve: str, stops: tuple[float, ...]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(codes, times, radiance)``: a real scene shot with the given steps (stops
+    between neighbours), the middle frame mapping the key to 0.18; through ``curve``
+    (``gamma``: 2.2, else DoRF's)."""
+    from benchmarks.truth.curves import load_curve
+    from benchmarks.truth.scenes import data_folder, read_scene
+
+    truth = read_scene(data_folder("openexr_scenes") / f"{scene}.exr", width=320)
+    times = np.exp2(np.concatenate([[0.0], np.cumsum(stops)]))
+    times *= 0.18 / truth.log_average / times[len(times) // 2]
+    response = gamma_response if curve == "gamma" else load_curve(curve).response
+    codes = render_brackets(truth.radiance, times, response, seed=3)
+    return codes, times, truth.radiance
+
+
+def _write_shuffled(folder, codes: np.ndarray, suffix: str = ".png") -> list:
+    """The brackets as metadata-less files named in a shuffled order (``img_3`` is not
+    the fourth exposure); returns the true order of the files, darkest first."""
+    order = np.random.default_rng(5).permutation(len(codes))
+    paths = [None] * len(codes)
+    for name, j in enumerate(order):
+        paths[j] = write_image(folder / f"img_{name}{suffix}", codes[j], "uint8")
+    return paths
+
+
+def _relative_error(radiance: np.ndarray, truth: np.ndarray) -> float:
+    """Median ``|k E / E_true - 1|`` over pixels positive in every channel, ``k`` the
+    median ratio (inferred exposures are relative: the scale is not the truth's)."""
+    seen = (truth > 0).all(axis=-1) & np.isfinite(radiance).all(axis=-1)
+    ratio = truth[seen] / np.maximum(radiance[seen], 1e-12)
+    return float(np.median(np.abs(radiance[seen] * np.median(ratio) / truth[seen] - 1)))
+
+
+@pytest.mark.parametrize(("scene", "curve", "stops", "said"), [
+    ("StillLife", "gamma", (2.0,) * 4, "step inferred: 2 stops"),
+    ("MtTamWest", "dorf50", (1.0,) * 6, "step inferred: 1 stop"),
+    ("Desk", "dorf150", (1 / 3,) * 8, "step inferred: 1/3 stop"),
+])
+def test_exposures_inferred_with_no_metadata(scene, curve, stops, said, shared_data,
+                                             tmp_path):
+    """PNGs with no metadata, named in a shuffled order: the ladder is put in order, its
+    step inferred and each exposure within 1/50 stop of the truth (measured: at most
+    0.0018 stop: self-calibration removes the starting curve's bias, the step its
+    scale); the merge's error against the scene is the true exposures' within 5 %
+    (measured: equal to 4 digits)."""
+    shared_data("openexr_scenes"), shared_data("crf_database")
+    from hdrio.pipeline import merge_paths
+
+    codes, times, truth = _ladder(scene, curve, stops)
+    paths = _write_shuffled(tmp_path, codes)
+    result = merge_paths(sorted(paths), options=OFF_PIPELINE)
+    assert [str(p) for p in paths] == list(result.stack.files)
+    assert result.exposures.inferred == said and result.stack.exposure_sources[0] == "data"
+    middle = len(times) // 2
+    error = np.log2(result.stack.exposures / (times / times[middle]))
+    assert np.abs(error).max() < 1 / 50, error
+    true = merge_stack(ExposureStack.from_arrays(codes, times),
+                       MergeOptions(align="off", deghost="off"))
+    assert _relative_error(result.radiance, truth) <= 1.05 * _relative_error(
+        true.radiance, truth)
+    assert result.exposures.warnings() == []  # no metadata to be off
+
+
+def test_exposures_inferred_from_jpeg(shared_data, tmp_path):
+    """Metadata-less JPEGs (OpenImageIO's default quality): JPEG's blur and quantisation
+    move the data's ratios (the metadata's --exposures-from-data sees the same), so each
+    estimate is within 0.04 stop of the truth (measured 0.018 here, 0.016-0.023 on
+    StillLife, GoldenGate and MtTamWest); the step is still 2 stops and the merge's error
+    within 5 % of the same files merged with the true exposures (0.0576 against
+    0.0572)."""
+    shared_data("openexr_scenes")
+    from hdrio.pipeline import merge_paths
+
+    codes, times, truth = _ladder("Tree", "gamma", (2.0,) * 4)
+    paths = _write_shuffled(tmp_path, codes, ".jpg")
+    result = merge_paths(paths[::-1], options=OFF_PIPELINE)
+    assert result.exposures.inferred == "step inferred: 2 stops"
+    error = np.log2(result.stack.exposures / (times / times[2]))
+    assert np.abs(error).max() < 0.04, error
+    true = merge_paths(paths, exposures=list(times),
+                       options=MergeOptions(align="off", deghost="off"))
+    assert _relative_error(result.radiance, truth) <= 1.05 * _relative_error(
+        true.radiance, truth)
+
+
+def test_an_irregular_step_is_anchored_to_the_starting_curve(shared_data):
+    """Steps of 1, 2, 1, 2 stops agree on no step: the set is anchored to the sRGB
+    curve's estimates, said so; each exposure within 0.2 stop of the truth (measured
+    0.167: a gamma-2.2 camera read through the sRGB curve) and the order right."""
+    shared_data("openexr_scenes")
+    codes, times, _ = _ladder("StillLife", "gamma", (1.0, 2.0, 1.0, 2.0))
+    placeholders = np.arange(1.0, 6.0)
+    stack = ExposureStack.from_arrays(codes[::-1], placeholders, exposure_sources=["data"] * 5)
+    result = merge_stack(stack, OFF_PIPELINE)
+    assert result.exposures.inferred.startswith("step irregular (")
+    assert result.exposures.inferred.endswith("anchored to the sRGB curve")
+    error = np.log2(result.stack.exposures / (times / times[2]))
+    assert np.abs(error).max() < 0.2, error
+
+
+def _stack_of(codes: np.ndarray, names: list[str]) -> ExposureStack:
+    return ExposureStack.from_arrays(codes, np.arange(1.0, len(codes) + 1), files=names,
+                                     exposure_sources=["data"] * len(codes))
+
+
+def test_what_cannot_be_inferred_names_the_file(shared_data):
+    """An all-black or all-clipped bracket, two copies of one exposure, two brackets,
+    brackets with no well-exposed pixel in common: one line naming the file
+    (hdrio.errors.InputError, exit 2 from the command)."""
+    from hdrio.errors import InputError
+
+    shared_data("openexr_scenes")
+    codes, _, _ = _ladder("StillLife", "gamma", (2.0,) * 4)
+    names = [f"b{j}.png" for j in range(5)]
+    black = codes.copy()
+    black[1] = 0
+    with pytest.raises(InputError, match=r"^b1\.png: all black \(no well-exposed code\)"):
+        merge_stack(_stack_of(black, names), OFF_PIPELINE)
+    twice = codes.copy()
+    twice[3] = twice[2]
+    with pytest.raises(InputError, match=r"^b[23]\.png: cannot be ordered against b[23]\.png"):
+        merge_stack(_stack_of(twice, names), OFF_PIPELINE)
+    with pytest.raises(InputError, match=r"^b1\.png: no exposure metadata, and two brackets"):
+        merge_stack(_stack_of(codes[1:3], names[:2]), OFF_PIPELINE)
+    clipped = codes.copy()
+    clipped[3] = 255
+    with pytest.raises(InputError, match=r"^b3\.png: all clipped \(no well-exposed code\)"):
+        merge_stack(_stack_of(clipped, names), OFF_PIPELINE)
+    # A 24-stop ramp shot 7 stops apart: no pixel is well exposed in two brackets.
+    ramp = np.exp2(np.linspace(-24, 0, 4096))[None, :, None] * np.ones((8, 1, 3))
+    far = render_brackets(ramp, np.exp2([3.0, 10.0, 17.0]), seed=1)
+    with pytest.raises(InputError, match=r"^b1\.png: no well-exposed pixels in common with "
+                                         r"b0\.png"):
+        merge_stack(_stack_of(far, names[:3]), OFF_PIPELINE)
+
+
+def test_cli_infers_a_folder_of_pngs_without_metadata(shared_data, tmp_path, capsys):
+    """hdrio merge and the chain on metadata-less PNGs: without --exposures-from-data the
+    error names the file and the option; with it, the summary line, the header."""
+    shared_data("openexr_scenes")
+    import OpenImageIO as oiio
+
+    codes, _, _ = _ladder("StillLife", "gamma", (2.0,) * 4)
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    paths = _write_shuffled(folder, codes)
+    output = tmp_path / "out.exr"
+    code, _, err = run(capsys, "merge", *sorted(paths), "-o", output)
+    assert code == 2 and "img_0.png: no exposure time" in err and "--exposures-from-data" in err
+    code, out, err = run(capsys, "merge", *sorted(paths), "--exposures-from-data", "-o",
+                         output)
+    assert code == 0, err
+    middle = paths[2].name
+    line = next(line for line in out.splitlines() if line.startswith("exposures:"))
+    assert line == (f"exposures: inferred from the pixels (no metadata), step inferred: 2 "
+                    f"stops; relative, {middle} = 1, -4.00 .. +4.00 stops"), line
+    spec = oiio.ImageInput.open(str(output)).spec()
+    assert spec.getattribute("hdrio:exposuresFromData") == 1
+    assert spec.getattribute("hdrio:exposuresInferred") == "step inferred: 2 stops"
+    assert spec.getattribute("hdrio:exposureUnits").startswith(f"relative to {middle} = 1")
+    assert spec.getattribute("hdrio:exposureSource") == "data"
+    assert spec.getattribute("hdrio:exposuresMetadata") is None
+    used = np.array(spec.getattribute("hdrio:exposures"), float)
+    np.testing.assert_allclose(np.log2(used), [-4, -2, 0, 2, 4], atol=1 / 50)
+    chained = tmp_path / "chain.exr"
+    code, _, err = run(capsys, folder, "--exposures-from-data", "--merge", "-o", chained)
+    assert code == 0 and "exposures inferred from the pixels" in err, err
+    chain_used = oiio.ImageInput.open(str(chained)).spec().getattribute("hdrio:exposures")
+    np.testing.assert_allclose(np.array(chain_used, float), used, rtol=1e-6)
+
+
+def test_group_without_metadata_needs_a_group_size(shared_data, tmp_path, capsys):
+    """Frames with no exposure and no capture time: --group cannot split them, so it
+    refuses before any work, naming a frame; --group-size N splits them, each set is
+    inferred."""
+    shared_data("openexr_scenes")
+    codes, _, _ = _ladder("StillLife", "gamma", (2.0,) * 4)
+    shoot = tmp_path / "shoot"
+    shoot.mkdir()
+    for j, frame in enumerate([*codes, *codes[::-1]]):  # two sets, the second reversed
+        write_image(shoot / f"IMG_{100 + j}.png", frame, "uint8")
+    pattern = str(tmp_path / "{first_stem}.exr")
+    code, _, err = run(capsys, shoot, "--exposures-from-data", "--group", "--merge", "-o",
+                       pattern)
+    assert code == 2 and "IMG_100.png: no exposure metadata and no capture time" in err, err
+    assert "--group-size" in err and not list(tmp_path.glob("*.exr"))
+    code, _, err = run(capsys, shoot, "--exposures-from-data", "--group-size", "5", "--group",
+                       "--merge", "-o", pattern)
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.glob("*.exr")) == ["IMG_100.exr", "IMG_105.exr"]
+
+
+def _stripped(files, folder) -> list:
+    """The brackets' pixels as PNGs with no metadata (EXIF gone), same stems."""
+    from hdrio.io.brackets import read_codes
+
+    return [write_image(folder / f"{f.stem}.png", read_codes(f)[0], "uint8") for f in files]
+
+
+def test_real_sets_stripped_of_metadata(shared_data, tmp_path):
+    """Real sets with their metadata stripped. hdrtoolbox 'alignment' (3 hand-held JPEGs,
+    EXIF 2 stops apart): step inferred 2 stops, each exposure within 0.05 stop of EXIF's
+    (measured 0.022). Memorial Church (16 film scans, nominal 1 stop): step 1 stop, and
+    the neighbouring ratios are the ones the data give when the exposure list is read
+    (measured equal to 3 decimals; they scatter 0.94-1.09 stops about the nominal).
+    Not asserted, reported in docs/method.md: the Canon JPEGs of frobisher (3 stops) and
+    'ghost' (2 stops) come out 3 2/3 and 2 2/3, the camera's curve steeper than sRGB's."""
+    from hdrio.io.brackets import read_brackets
+    from hdrio.pipeline import merge_paths
+
+    folder = shared_data("hdrtoolbox_stacks") / "alignment"
+    files = sorted(folder.glob("*.jpg"))
+    exif = read_brackets(files).exposures
+    (tmp_path / "a").mkdir()
+    result = merge_paths(_stripped(files, tmp_path / "a")[::-1],
+                         options=MergeOptions(exposures_from_data=True, deghost="off"))
+    assert result.exposures.inferred == "step inferred: 2 stops"
+    error = np.log2(result.stack.exposures / (exif / exif[1]))
+    assert np.abs(error).max() < 0.05, error
+
+    folder = shared_data("memorial_debevec")
+    files = sorted(folder.glob("*.png"))
+    options = MergeOptions(exposures_from_data=True, exclude_colour=(0, 0, 255),
+                           align="off", deghost="off")
+    listed = merge_paths(files, exposures_from=folder / "exposures.csv", options=options)
+    (tmp_path / "m").mkdir()
+    inferred = merge_paths(_stripped(files, tmp_path / "m"), options=options)
+    assert inferred.exposures.inferred == "step inferred: 1 stop"
+    assert [Path(f).stem for f in inferred.stack.files] == [
+        Path(f).stem for f in listed.stack.files]
+    np.testing.assert_allclose(np.diff(np.log2(inferred.stack.exposures)),
+                               np.diff(np.log2(listed.stack.exposures)), atol=0.01)

@@ -145,12 +145,31 @@ def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
     recipe, named = _recipe(steps)
     sets = group_brackets(chain.brackets, settings.get("group_gap", DEFAULT_MAX_GAP_S),
                           settings.get("group_size"))
+    _check_inferable(sets, settings, steps)
     tasks = plan_sets(sets, outputs_for, recipe, named, size=settings.get("group_size"),
                       force=bool(settings.get("force")), shard=settings.get("shard"))
     for task in tasks:  # a pattern naming an input is not a finished output
         for output in task.outputs:
             check_not_an_input(output, task.files)
     return tasks
+
+
+def _check_inferable(sets, settings: dict[str, Any], steps: list[Step]) -> None:
+    """``--exposures-from-data`` on frames with no exposure and no capture time: only
+    ``--group-size`` can split them into sets (nothing else marks where a set ends), so
+    without it, refuse before any work, naming a frame."""
+    inferring = settings.get("exposures_from_data") or any(
+        step.name == "--exposures-from-data" for step in steps)
+    if not inferring or settings.get("group_size") is not None:
+        return
+    frames = [frame for bracket_set in sets for frame in bracket_set.frames]
+    if len(sets) > 1 or all(frame.captured is not None for frame in frames):
+        return
+    unknown = next((frame for frame in frames if frame.exposure is None), None)
+    if unknown is not None:
+        raise ChainError(f"{unknown.path}: no exposure metadata and no capture "
+                         "time, so nothing marks where one bracket set ends; give "
+                         "--group-size N (N frames in name order per set)")
 
 
 # ------------------------------------------------------------------------------- run

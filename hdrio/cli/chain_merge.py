@@ -111,6 +111,8 @@ def _merge(chain: Chain, domain: str | None) -> None:
     chain.last_merge = result
     for line in result.exposures.warnings() if result.exposures is not None else ():
         print(f"hdrio: warning: {line}", file=sys.stderr)
+    if result.exposures is not None and result.exposures.inferred:
+        print(f"hdrio: exposures {result.exposures.line()}", file=sys.stderr)
     chain.images.append(Image(output_pixels(result), exr_attributes(result),
                               f"merge of {result.stack.count} brackets", statistics=result,
                               layers=merge_layers(result), alpha=merge_alpha(result)))

@@ -140,12 +140,16 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     bits = 8 if stack.code_max == 255 else 16
     full, robust = report.dynamic_range_stops, report.robust_range_stops
     params = result.response.parameters
+    inferred = result.exposures.line() if result.exposures is not None else ""
+    span = (f"relative exposures {stack.exposures[0]:.4g} .. {stack.exposures[-1]:.4g}"
+            if inferred else f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])}")
     lines = [
-        f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), "
-        f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])} "
+        f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), {span} "
         f"(exposures from {stack.exposure_sources[0]}"
-        + (", then from the data" if result.exposures and result.exposures.used else "")
+        + (", then from the data" if result.exposures and result.exposures.used
+           and not inferred else "")
         + f"), read in {times['read']:.2f} s",
+        *([f"exposures: {inferred}"] if inferred else []),
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",

@@ -136,8 +136,12 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            group=_EXPOSURE,
            help="merge with each bracket's exposure estimated from the overlap of "
                 "well-exposed pixels (anchored to the metadata's; a bracket more than 1/6 "
-                "stop from its metadata is named either way); with no metadata, give the "
-                "nominal step with --exposures"),
+                "stop from its metadata is named either way); with no metadata at all (3 "
+                "brackets or more), infer them: brightness order, the step rounded to 1/3 "
+                "stop when the ratios agree on one, relative exposures (the middle bracket "
+                "= 1); the sRGB curve (linear for 16-bit) sets the scale, so a camera "
+                "whose curve differs can get the step wrong: give the nominal step with "
+                "--exposures then (docs/method.md)"),
     Option("--nd", ("STOPS[:PATTERN]",), "nd", nd_filter, example=("1:c.jpg",),
            repeat=True, group=_EXPOSURE,
            help="the brackets whose name matches PATTERN (all without one) were shot "

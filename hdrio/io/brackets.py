@@ -31,6 +31,9 @@ _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
 
 
 _ROWS_PER_READ = 256
+PLACEHOLDERS = "data"
+"""The exposure source of brackets read with no metadata (``infer_exposures``): their
+exposures are placeholders until :func:`hdrio.merge.ladder.infer_exposures`."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,7 @@ def read_brackets(
     white_balance: Sequence[float] | None = None,
     skip_brackets: bool = True,
     stop_when_covered: bool = False,
+    infer_exposures: bool = False,
 ) -> ExposureStack:
     """Read brackets into an :class:`ExposureStack` sorted by increasing exposure.
 
@@ -189,7 +193,8 @@ def read_brackets(
         raise InputError(paths[raw.index(not raw[0])], "camera RAW and other images cannot "
                                                         "be merged together; use one kind")
     if all(raw):
-        return _raw_stack(paths, exposures, exposures_from, progress, white_balance)
+        return _raw_stack(paths, exposures, exposures_from, progress, white_balance,
+                          infer_exposures)
     # Headers first: sizes and exposures are checked before any pixel is decoded, and
     # each bracket is then decoded straight into its slot of one array, in exposure
     # order (peak memory: the stack plus one band of rows).
@@ -203,7 +208,9 @@ def read_brackets(
                 f"{_describe(first.shape, first.code_max)}: brackets must match",
             )
     values, source = _resolve_exposures(paths, [h.exif for h in headers], exposures,
-                                        exposures_from)
+                                        exposures_from, infer_exposures)
+    if source == PLACEHOLDERS:  # the exposure order is not known before decoding
+        skip_brackets = stop_when_covered = False
     order = np.argsort(np.asarray(values, dtype=np.float64), kind="stable")
     count = len(paths)
     codes = codes_buffer((count, *first.shape), first.dtype)
@@ -287,7 +294,7 @@ def _drop_beyond(position: int, kind: str, count: int, kept: list[int],
 
 
 def _raw_stack(paths: list[Path], exposures, exposures_from, progress,
-               white_balance: Sequence[float] | None) -> ExposureStack:
+               white_balance: Sequence[float] | None, infer: bool) -> ExposureStack:
     """Camera RAW brackets (:mod:`hdrio.io.raw`): linear codes, one white balance."""
     decoded = read_raw_set(paths, white_balance, progress=progress)
     first_codes, code_max, _ = decoded[0]
@@ -299,7 +306,7 @@ def _raw_stack(paths: list[Path], exposures, exposures_from, progress,
                 f"{_describe(first_codes.shape, code_max)}: brackets must match",
             )
     exif = [entry[2] for entry in decoded]
-    values, source = _resolve_exposures(paths, exif, exposures, exposures_from)
+    values, source = _resolve_exposures(paths, exif, exposures, exposures_from, infer)
     return ExposureStack.from_arrays(
         np.stack([entry[0] for entry in decoded]), values, files=[str(p) for p in paths],
         code_max=code_max, exposure_sources=[source] * len(paths), metadata=exif)
@@ -316,7 +323,10 @@ def _resolve_exposures(
     exif: list[dict],
     explicit: Sequence[float | str] | None,
     sidecar: str | Path | None,
+    infer: bool = False,
 ) -> tuple[list[float], str]:
+    """``(exposures, source)`` in the order of ``paths``; with ``infer`` and no source,
+    placeholders ``1, 2, 3...`` and :data:`PLACEHOLDERS`."""
     if explicit is not None:
         if len(explicit) != len(paths):
             at_fault = paths[len(explicit)] if len(explicit) < len(paths) else paths[-1]
@@ -348,6 +358,8 @@ def _resolve_exposures(
     from_names = [exposure_from_filename(path) for path in paths]
     if all(value is not None for value in from_names):
         return from_names, "filename"  # type: ignore[return-value]
+    if infer:
+        return [float(j + 1) for j in range(len(paths))], PLACEHOLDERS
     missing = next(
         (p for p, r, n in zip(paths, readings, from_names) if r is None and n is None),
         next(p for p, r in zip(paths, readings) if r is None),
@@ -355,5 +367,6 @@ def _resolve_exposures(
     raise InputError(
         missing,
         "no exposure time: no EXIF ExposureTime and no 'numerator denominator' in the name; "
-        "give --exposures or --exposures-from",
+        "give --exposures or --exposures-from, or --exposures-from-data to infer them "
+        "from the pixels",
     )

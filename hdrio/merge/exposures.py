@@ -57,6 +57,23 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
     response
         The camera response whose ``log_inverse`` linearises the codes.
     """
+    meta = np.log(np.asarray(exposures, np.float64))
+    log_t, _ = fit_log_exposures(codes, response, prior=meta)
+    return np.exp(anchor_Theil_Sen(log_t, meta))
+
+
+def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
+                      prior: np.ndarray | None = None) -> tuple[np.ndarray, list[int]]:
+    """``(log_t, unlinked)``: natural-log exposures ``(P,)`` of ``codes`` (brackets in
+    increasing exposure), up to a common offset (``log_t[0] = 0`` when nothing else
+    fixes it), fitted by weighted least squares to the median log ratios of brackets one
+    and two apart; and the cuts ``c`` (between bracket ``c`` and ``c + 1``) that no
+    measured ratio spans (empty when every bracket is placed by the data).
+
+    ``prior``: log exposures whose neighbouring ratios tie the fit weakly (the
+    metadata's; they place a bracket with no overlap). Without it, an unlinked cut
+    leaves the brackets on either side unrelated (their offset is arbitrary).
+    """
     count, height, width, channels = codes.shape
     stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
     sample = strided_copy(codes, stride).reshape(count, -1, channels)  # staged: paged out
@@ -65,8 +82,8 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
     columns = np.arange(channels)
     log_e = response.log_inverse[sample, columns]
     good = (sample > low) & (sample < high) & response.supported[sample, columns]
-    meta = np.log(np.asarray(exposures, np.float64))
     rows, targets, weights = [], [], []
+    linked = np.zeros(max(count - 1, 0), bool)
     for j in range(count):
         for k in range(j + 1, min(count, j + 3)):
             both = good[j] & good[k]
@@ -75,17 +92,18 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
                 rows.append((j, k))
                 targets.append(float(np.median(log_e[k][both] - log_e[j][both])))
                 weights.append(math.sqrt(overlap))
-            if k == j + 1:  # the weak tie to the metadata
+                linked[j:k] = True
+            if k == j + 1 and prior is not None:  # the weak tie to the metadata
                 rows.append((j, k))
-                targets.append(meta[k] - meta[j])
+                targets.append(prior[k] - prior[j])
                 weights.append(PRIOR_WEIGHT)
     design = np.zeros((len(rows) + 1, count))
     for r, (j, k) in enumerate(rows):
         design[r, j], design[r, k] = -weights[r], weights[r]
-    design[-1, 0] = 1.0  # the gauge; the anchor below replaces it
+    design[-1, 0] = 1.0  # the gauge; the caller's anchor replaces it
     target = np.append(np.asarray(targets) * np.asarray(weights), 0.0)
     log_t = np.linalg.lstsq(design, target, rcond=None)[0]
-    return np.exp(anchor_Theil_Sen(log_t, meta))
+    return log_t, [int(c) for c in np.flatnonzero(~linked)]
 
 
 def anchor_Theil_Sen(log_t: np.ndarray, meta: np.ndarray) -> np.ndarray:
@@ -120,12 +138,20 @@ class ExposureCheck:
         Relative exposures (the metadata's units): as read, and from the data.
     used
         Whether the merge used ``estimated`` (``--exposures-from-data``).
+    inferred
+        With no metadata at all (:mod:`hdrio.merge.ladder`): how the set was anchored,
+        e.g. ``"step inferred: 2 stops"``; ``metadata`` then holds the anchor's
+        exposures and ``estimated`` is relative to :attr:`reference`. Empty otherwise.
+    reference
+        The bracket whose inferred exposure is 1 (with ``inferred``).
     """
 
     files: tuple[str, ...]
     metadata: np.ndarray
     estimated: np.ndarray
     used: bool = False
+    inferred: str = ""
+    reference: str = ""
 
     @property
     def stops(self) -> np.ndarray:
@@ -133,8 +159,11 @@ class ExposureCheck:
         return np.log2(self.estimated / self.metadata)
 
     def warnings(self) -> list[str]:
-        """One line per bracket off by more than :data:`WARN_STOPS`, naming its file."""
-        lines = []
+        """One line per bracket off by more than :data:`WARN_STOPS`, naming its file
+        (none when there was no metadata to be off)."""
+        lines: list[str] = []
+        if self.inferred:
+            return lines
         for name, meta, data, stops in zip(self.files, self.metadata, self.estimated,
                                            self.stops, strict=True):
             if abs(stops) > WARN_STOPS:
@@ -147,10 +176,34 @@ class ExposureCheck:
 
     def attributes(self) -> dict[str, object]:
         """``hdrio:exposuresMetadata``, ``hdrio:exposuresEstimated`` (decimal text, like
-        ``hdrio:exposures``) and ``hdrio:exposuresFromData`` (1 when used)."""
+        ``hdrio:exposures``) and ``hdrio:exposuresFromData`` (1 when used); with no
+        metadata, ``hdrio:exposuresInferred`` (how the set was anchored) and
+        ``hdrio:exposureUnits`` instead of the metadata's."""
+        if self.inferred:
+            return {"hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
+                    "hdrio:exposuresFromData": 1,
+                    "hdrio:exposuresInferred": self.inferred,
+                    "hdrio:exposureUnits": self.units}
         return {"hdrio:exposuresMetadata": [f"{t:.9g}" for t in self.metadata],
                 "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                 "hdrio:exposuresFromData": int(self.used)}
+
+
+    @property
+    def units(self) -> str:
+        """What the exposures are measured in (seconds, unless inferred)."""
+        if self.inferred:
+            return (f"relative to {Path(self.reference).name} = 1 (no exposure metadata: "
+                    "inferred from the pixels)")
+        return "the metadata's (seconds, or t ISO/100 / N^2 when aperture or ISO vary)"
+
+    def line(self) -> str:
+        """The summary's one line on inferred exposures (empty when there was metadata)."""
+        if not self.inferred:
+            return ""
+        stops = np.log2(self.estimated)
+        return (f"inferred from the pixels (no metadata), {self.inferred}; relative, "
+                f"{Path(self.reference).name} = 1, {stops[0]:+.2f} .. {stops[-1]:+.2f} stops")
 
 
 def _text(t: float) -> str:

@@ -1,0 +1,224 @@
+"""Exposures of brackets with no metadata at all, inferred from the pixels
+(``--exposures-from-data`` when no EXIF, file-name convention, sidecar or ``--exposures``
+gives them).
+
+The brackets are put in order of brightness: every pixel's code grows with exposure, so
+the longer of two brackets has the higher codes at every percentile (which holds when
+the brackets are not registered, as scans and hand-held shots are not;
+:func:`brightness_order`). Their ratios are measured, as with metadata
+(:func:`hdrio.merge.exposures.fit_log_exposures`: medians of ``g(z_k) - g(z_j)`` over
+pixels well exposed in both), first through a *starting response*, the standard curve of
+the input encoding (:func:`starting_response`: sRGB's for 8-bit, linear for 16-bit and
+RAW), then through the response solved with them, iterated (Mitsunaga & Nayar 1999).
+
+What the metadata fixed must now be fixed another way: a set of brackets and its response
+are known only up to ``g -> s g + c``, ``ln t -> s ln t + c`` (the exponent ambiguity of
+self-calibration; Grossberg & Nayar 2003). ``c`` is a choice of unit: the exposures are
+relative, the middle bracket of the ladder (the 0 EV frame of an auto-exposure bracket)
+is 1. ``s`` is fixed by the step: cameras bracket in steps of 1/3 stop, so when the
+neighbouring ratios agree on one step (each within :data:`STEP_AGREEMENT` of their
+median) the median rounded to 1/3 stop is taken as exact and the uniform ladder anchors
+the set ("step inferred: 2 stops"); otherwise the starting response's own estimates
+anchor it (its slope is then the assumption, and is said).
+
+References
+----------
+Mitsunaga, T., Nayar, S. K. (1999). Radiometric self calibration. CVPR 1999, 374-380.
+Grossberg, M. D., Nayar, S. K. (2003). Determining the camera response from images:
+what is knowable? IEEE TPAMI 25(11), 1455-1467.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from hdrio.errors import InputError
+from hdrio.io.brackets import PLACEHOLDERS
+from hdrio.io.staging import strided_copy
+from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.exposures import fit_log_exposures as fit
+from hdrio.response.curve import CameraResponse
+from hdrio.response.linear import linear_response
+from hdrio.skips import classify
+from hdrio.stack import ExposureStack
+
+CAMERA_STEP = 1 / 3
+"""Stops: cameras bracket in multiples of a third of a stop."""
+STEP_AGREEMENT = 0.1
+"""Stops: the ladder is uniform when every neighbouring ratio is this close to their
+median (after self-calibration the ratios scatter by about 0.01 stop; an irregular
+ladder's by a third of a stop or more)."""
+ORDER_LEVELS = np.concatenate([np.arange(1.0, 100.0), 100.0 - np.logspace(0, -3, 13)[1:]])
+"""Percentiles of each bracket's codes compared when ordering: 1 to 99, and 12 more up to
+99.999 (in a short exposure only the brightest pixels show anything)."""
+ORDER_AGREEMENT = 0.75
+"""Of the percentiles that differ by more than a code, the share that must be higher in
+the brighter of two neighbours for them to be ordered."""
+ORDER_MIN_LEVELS = 3
+"""Percentiles that must be higher in the brighter of two neighbours."""
+ADOBE_RGB_GAMMA = 563 / 256
+
+
+def needs_inference(stack: ExposureStack) -> bool:
+    """Whether ``stack``'s exposures are placeholders (read with no metadata)."""
+    return bool(stack.exposure_sources) and stack.exposure_sources[0] == PLACEHOLDERS
+
+
+def starting_response(code_max: int, channels: int, encoding: str = "sRGB",
+                      linear: bool = False) -> CameraResponse:
+    """The standard inverse response of an encoding: where the ratios start.
+
+    Parameters
+    ----------
+    code_max
+        255 for 8-bit codes; larger codes (16-bit) are taken as linear.
+    channels
+        Columns of the table.
+    encoding
+        :mod:`hdrio.cms.encoding` name: ``"Adobe RGB (1998)"`` is a pure power of
+        563/256; sRGB and Display P3 share the sRGB curve (IEC 61966-2-1).
+    linear
+        Linear codes (camera RAW, ``--response linear``) whatever their depth.
+
+    Returns
+    -------
+    CameraResponse
+        ``g(z) = ln f^-1(z)``, ``g(z_mid) = 0``, method ``"start:<curve>"``; codes 0 and
+        ``code_max`` unsupported.
+    """
+    if linear or code_max > 255:
+        response = linear_response(code_max, channels)
+        return replace(response, method="start:linear")
+    v = np.arange(code_max + 1, dtype=np.float64) / code_max
+    if encoding == "Adobe RGB (1998)":
+        curve, x = "Adobe RGB", v ** ADOBE_RGB_GAMMA
+    else:
+        curve = "sRGB"
+        x = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    g = np.log(np.maximum(x, x[1] / 2))
+    g -= g[(code_max + 1) // 2]
+    supported = np.ones((code_max + 1, channels), bool)
+    supported[[0, code_max]] = False
+    return CameraResponse(np.repeat(g[:, None], channels, axis=1), code_max, supported,
+                          method=f"start:{curve}")
+
+
+def brightness_order(stack: ExposureStack) -> np.ndarray:
+    """Indices of ``stack``'s brackets from darkest to brightest.
+
+    Raises :class:`InputError` naming the file when a bracket has no well-exposed code
+    (all black or all clipped: nothing places it on the ladder), or when two neighbours
+    cannot be told apart (too few pixels differ, or they differ both ways).
+    """
+    for name, codes in zip(stack.files, stack.codes):
+        kind = classify(codes, stack.code_max)
+        if kind in ("dark", "bright"):
+            said = "black" if kind == "dark" else "clipped"
+            raise InputError(name, f"all {said} (no well-exposed code): its exposure cannot "
+                                   "be inferred from the pixels; leave it out or give "
+                                   "--exposures")
+    count, height, width, _ = stack.codes.shape
+    stride = max(1, math.ceil(math.sqrt(height * width / (1 << 16))))
+    sample = strided_copy(stack.codes, stride).reshape(count, -1, stack.shape[2])
+    # Pixels with a channel black and another clipped (registration borders, pure
+    # colours) say nothing of the exposure.
+    pure = (sample == 0).any(axis=-1) & (sample == stack.code_max).any(axis=-1)
+    levels = np.array([np.percentile(codes[~out] if not out.all() else codes, ORDER_LEVELS)
+                       for codes, out in zip(sample, pure)])  # (P, levels)
+    order = np.argsort(levels.mean(axis=1), kind="stable")
+    for darker, brighter in zip(order[:-1], order[1:]):
+        difference = levels[brighter] - levels[darker]
+        up, down = np.count_nonzero(difference > 1), np.count_nonzero(difference < -1)
+        if up < ORDER_MIN_LEVELS or down > (1 - ORDER_AGREEMENT) * (up + down):
+            raise InputError(stack.files[brighter],
+                             f"cannot be ordered against {Path(stack.files[darker]).name} "
+                             f"by brightness ({up} of {levels.shape[1]} percentiles "
+                             f"brighter, {down} darker): the same exposure, or a different "
+                             "picture; give --exposures")
+    return order
+
+
+def in_brightness_order(stack: ExposureStack) -> ExposureStack:
+    """``stack`` (read with no metadata) sorted from darkest to brightest
+    (:func:`brightness_order`), placeholder exposures 1, 2, 3...; raises
+    :class:`InputError` naming a file when the set cannot be inferred (fewer than three
+    brackets, a bracket all black or all clipped, two that cannot be ordered)."""
+    if stack.count < 3:
+        raise InputError(stack.files[-1], "no exposure metadata, and two brackets cannot "
+                                          "show their step (--exposures-from-data infers "
+                                          "it from three brackets or more); give --exposures")
+    order = brightness_order(stack)
+    if np.all(order == np.arange(stack.count)):
+        return stack
+    placeholders = np.empty(stack.count)
+    placeholders[order] = np.arange(1.0, stack.count + 1)
+    return ExposureStack.from_arrays(
+        stack.codes, placeholders, files=stack.files, code_max=stack.code_max,
+        exposure_sources=stack.exposure_sources, metadata=stack.metadata or None,
+        dropped=stack.dropped)
+
+
+def infer_exposures(stack: ExposureStack, start: CameraResponse,
+                    solve: Callable[[ExposureStack], CameraResponse] | None = None
+                    ) -> tuple[ExposureStack, CameraResponse, ExposureCheck]:
+    """The exposures of a stack read with no metadata (:func:`needs_inference`).
+
+    Parameters
+    ----------
+    stack
+        Three brackets or more, darkest first (:func:`in_brightness_order`), exposures
+        placeholders.
+    start
+        The starting response (:func:`starting_response`), or a saved one.
+    solve
+        Solves the response of a stack (``None``: ``start`` is kept, as for a saved
+        response).
+
+    Returns
+    -------
+    tuple
+        The stack with the inferred exposures (relative: the middle bracket is 1), the
+        response to merge with, and the check (``inferred`` says how the set was
+        anchored).
+    """
+    log_t, unlinked = fit(stack.codes, start)
+    if unlinked:
+        c = unlinked[0]
+        raise InputError(stack.files[c + 1], "no well-exposed pixels in common with "
+                                             f"{Path(stack.files[c]).name}: its exposure "
+                                             "cannot be inferred; give --exposures")
+    # Self-calibration with the starting curve's scale: the ratios become consistent.
+    first = replace(stack, exposures=np.exp(log_t))
+    _, response, check = exposures_from_data(first, start, True, solve)
+    stops = np.diff(np.log2(check.estimated))
+    median = float(np.median(stops))
+    step = round(median / CAMERA_STEP) * CAMERA_STEP
+    if step > 0 and np.all(np.abs(stops - median) <= STEP_AGREEMENT):
+        anchor = np.exp2(step * np.arange(stack.count))
+        how = f"step inferred: {_stops(step)}"
+        _, response, check = exposures_from_data(replace(stack, exposures=anchor),
+                                                 response, True, solve)
+        estimated = check.estimated
+    else:  # check.estimated is anchored to log_t already (Theil-Sen)
+        anchor = np.exp(log_t)
+        how = (f"step irregular ({stops.min():.2f} .. {stops.max():.2f} stops): anchored to "
+               f"the {start.method.removeprefix('start:')} curve")
+        estimated = check.estimated
+    middle = stack.count // 2
+    estimated = estimated / estimated[middle]
+    anchor = anchor / anchor[middle]
+    stack = replace(stack, exposures=estimated)
+    return stack, response, ExposureCheck(stack.files, anchor, estimated, True, how,
+                                          stack.files[middle])
+
+
+def _stops(step: float) -> str:
+    thirds = round(step * 3)
+    whole, rest = divmod(thirds, 3)
+    text = str(whole) if rest == 0 else (f"{rest}/3" if whole == 0 else f"{whole} {rest}/3")
+    return f"{text} stop" + ("s" if thirds > 3 else "")
