@@ -54,7 +54,7 @@ from hdrio.cli.values import (
     whole,
 )
 from hdrio.errors import HdrioError
-from hdrio.merge.highlights import HIGHLIGHT_MODES
+from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
 from hdrio.merge.saturation import SATURATION_POLICIES
 
 __all__ = ["MERGE_OPTIONS", "OPTIONS_BY_NAME", "Option", "add_arguments", "merge_method",
@@ -189,11 +189,9 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "lower bound) as the EXR channel clipped.Y, counted by hdrio check"),
     Option("--highlights", ("MODE",), "highlights", choice(*HIGHLIGHT_MODES),
            example=("reconstruct",),
-           help="pixels with channels clipped in every bracket: 'clip' (default: the "
-                "merge's lower bound, neutral where every channel clipped) or "
-                "'reconstruct' (the clipped channels estimated from the unclipped ones "
-                "with the colour of the unclipped pixels around the clip; never lower "
-                "than 'clip'; docs/highlights.md)"),
+           help="pixels with channels clipped in every bracket: 'clip' (default: "
+                f"{HIGHLIGHT_HELP['clip']}) or 'reconstruct' ({HIGHLIGHT_HELP['reconstruct']}"
+                "; a clipped channel never below its clip's lower bound; docs/highlights.md)"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
            help="keep pixels of this code value out of the solve and the merge (e.g. "

@@ -46,6 +46,12 @@ import numpy as np
 from scipy import ndimage
 
 HIGHLIGHT_MODES = ("clip", "reconstruct")
+HIGHLIGHT_HELP = {
+    "clip": "the merge's lower bound (neutral where every channel is clipped)",
+    "reconstruct": "clipped channels estimated from the unclipped ones and the colour "
+                   "of the unclipped pixels around the clip",
+}
+"""Each mode in a few words, for the front ends."""
 
 RING = (2, 8)
 """Pixels (Chebyshev distance) from a clipped region whose colour it takes: from 2 (the
