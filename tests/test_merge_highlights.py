@@ -135,3 +135,32 @@ def test_unknown_mode_is_refused():
     stack = ExposureStack.from_arrays(codes, TIMES[:2], files=["a.png", "b.png"])
     with pytest.raises(ValueError, match="highlights 'inpaint'"):
         merge_stack(stack, MergeOptions(highlights="inpaint"))
+
+
+def test_groups_of_blocks_give_what_the_whole_image_as_one_box_gives():
+    # Lamps far apart (three groups of blocks) and an L-shaped clip: each region and
+    # its ring lie in one group, so cutting the image into groups changes nothing.
+    from hdrio.merge.debevec1997 import estimate_tables
+    from hdrio.merge.highlights import _reconstruct_box, clip_groups, reconstruct_highlights
+
+    scene = lamp_scene(256, 320)
+    y, x = np.mgrid[0:256, 0:320]
+    scene[(y > 230) & (x < 60)] += 4e4 * np.array([0.3, 1.0, 0.6])  # the L's foot
+    scene[(x < 12) & (y > 200)] += 4e4 * np.array([0.3, 1.0, 0.6])  # and its stem
+    scene[20:26, 250:256] += 3e4 * np.array([1.0, 0.2, 0.9])  # a small magenta lamp
+    codes = render_brackets(scene, TIMES, seed=2)
+    stack = ExposureStack.from_arrays(codes, TIMES, files=[f"f{j}.png" for j in range(5)])
+    response, _ = gamma_inverse_response()
+    result = merge_stack(stack, MergeOptions(align="off", deghost="off"), response=response)
+    limits = np.asarray(result.statistics.limits)
+    estimates = estimate_tables(response, stack.channel_exposures, "linear")[0]
+    clipped = np.any(codes[0] >= limits, axis=-1)
+    boxes = list(clip_groups(clipped))
+    assert len(boxes) >= 3
+    grouped = result.radiance.copy()
+    reconstruct_highlights(grouped, codes[0], limits, estimates, False)
+    whole = result.radiance.copy()
+    bound = estimates[limits, np.arange(3)]
+    _reconstruct_box(whole, codes[0], limits, clipped, ~clipped, bound, estimates, False)
+    np.testing.assert_array_equal(grouped, whole)
+    assert not np.array_equal(grouped, result.radiance)

@@ -58,6 +58,8 @@ RING = (2, 8)
 first pixel next to the clip is skipped) to 8."""
 _RATIO_FLOOR = 0.05  # a chromaticity's channel is at least this fraction of its largest
 _EIGHT = np.ones((3, 3), dtype=bool)  # 8-connected regions
+BLOCK = 32
+"""Pixels: clipped pixels are grouped by blocks of this side (:func:`clip_groups`)."""
 
 
 @dataclass(frozen=True)
@@ -81,13 +83,28 @@ class HighlightReport:
                 f"({self.regions} regions) from their neighbours' colour")
 
 
-def _box(mask: np.ndarray, pad: int) -> tuple[slice, slice]:
-    """The bounding box of ``mask``'s true pixels ``(H, W)``, ``pad`` pixels wider (within
-    the image)."""
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+def clip_groups(mask: np.ndarray, block: int = BLOCK):
+    """Boxes that hold ``mask``'s pixels ``(H, W)`` and the ring around them, apart.
+
+    ``mask`` is cut into ``block`` x ``block`` blocks; the blocks with a true pixel,
+    grown by one block (more than :data:`RING`'s 8 px), are grouped 8-connected. Yields
+    ``(box, own)`` per group: ``box`` a pair of slices (the group's bounding box in
+    pixels), ``own`` ``(h, w)`` bool the box's pixels in the group's blocks. A clipped
+    region and its ring lie in one group; two groups' boxes may overlap, their ``own``
+    pixels never do.
+    """
     height, width = mask.shape
-    return (slice(max(rows[0] - pad, 0), min(rows[-1] + pad + 1, height)),
-            slice(max(cols[0] - pad, 0), min(cols[-1] + pad + 1, width)))
+    rows, cols = -(-height // block), -(-width // block)
+    padded = np.zeros((rows * block, cols * block), dtype=bool)
+    padded[:height, :width] = mask
+    blocks = padded.reshape(rows, block, cols, block).any(axis=3).any(axis=1)
+    grown = ndimage.binary_dilation(blocks, structure=_EIGHT)
+    labels, _ = ndimage.label(grown, structure=_EIGHT)
+    for group, (r, c) in enumerate(ndimage.find_objects(labels), start=1):
+        box = (slice(r.start * block, min(r.stop * block, height)),
+               slice(c.start * block, min(c.stop * block, width)))
+        own = (labels[r, c] == group).repeat(block, axis=0).repeat(block, axis=1)
+        yield box, own[:box[0].stop - box[0].start, :box[1].stop - box[1].start]
 
 
 def border_chromaticity(values: np.ndarray, mask: np.ndarray,
@@ -101,7 +118,7 @@ def border_chromaticity(values: np.ndarray, mask: np.ndarray,
     mask : ndarray of bool, (H, W)
         The pixels whose colour is wanted.
     seen : ndarray of bool, (H, W), optional
-        Pixels whose values may be used (others, e.g. masked out of the merge, are not).
+        Pixels whose values may be used (not clipped, not masked out of the merge).
 
     Returns
     -------
@@ -162,48 +179,63 @@ def reconstruct_highlights(radiance: np.ndarray, shortest: np.ndarray, limits,
     """
     channels = radiance.shape[-1]
     limits = np.asarray(limits, dtype=np.int64)
-    clipped = shortest >= limits  # (H, W, C)
-    any_clipped = clipped.any(axis=-1)
+    any_clipped = shortest[..., 0] >= limits[0]
+    for c in range(1, channels):
+        any_clipped |= shortest[..., c] >= limits[c]
     if seen is not None:
         any_clipped &= seen
     if channels < 2 or not any_clipped.any():
         return None
-    box = _box(any_clipped, RING[1])
-    crop, clipped = radiance[box], clipped[box]
-    region = any_clipped[box]
-    inside = None if seen is None else seen[box]
-    fully = region & clipped.all(axis=-1)
-    partly = region & ~fully
     # A clipped channel is at least its estimate at its limit (the first dropped code).
     bound = estimates[np.minimum(limits, estimates.shape[0] - 1), np.arange(channels)]
+    counts = np.zeros(3, dtype=np.int64)
+    for box, own in clip_groups(any_clipped):
+        region = any_clipped[box] & own
+        usable = ~any_clipped[box] if seen is None else ~any_clipped[box] & seen[box]
+        counts += _reconstruct_box(radiance[box], shortest[box], limits, region, usable,
+                                   bound, estimates, pixel_rule)
+    return HighlightReport(partly=int(counts[0]), fully=int(counts[1]),
+                           regions=int(counts[2]), pixels=int(any_clipped.size))
+
+
+def _reconstruct_box(crop: np.ndarray, codes: np.ndarray, limits: np.ndarray,
+                     region: np.ndarray, usable: np.ndarray, bound: np.ndarray,
+                     estimates: np.ndarray, pixel_rule: bool) -> tuple[int, int, int]:
+    """:func:`reconstruct_highlights` on one box (:func:`clip_groups`): ``crop`` ``(h, w,
+    C)`` radiance changed in place at ``region``'s pixels, from ``usable`` pixels'
+    colour; ``codes`` the shortest bracket's there. Returns the counts of partly and
+    fully clipped pixels and of regions."""
+    channels = crop.shape[-1]
+    clipped = codes >= limits
+    fully = region & clipped.all(axis=-1)
+    partly = region & ~fully
     # Stage 1: partly clipped pixels from their unclipped channels and the ring's ratios.
-    rho, regions = border_chromaticity(crop, region, inside)
+    rho, regions = border_chromaticity(crop, region, usable)
     rho = rho[partly[region]]
     today = crop[partly].astype(np.float64)
     lost = clipped[partly]
     measured = today
     if pixel_rule:  # the neutral bound replaced the unclipped channels' measurements
-        measured = estimates[shortest[box][partly], np.arange(channels)]
+        measured = estimates[codes[partly], np.arange(channels)]
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = (np.where(lost, 0, measured).sum(-1)
                  / np.where(lost, 0, rho).sum(-1))[:, None]
         if pixel_rule:  # the whole pixel in the ring's colour, no channel below its bound
             scale = np.maximum(scale, np.where(lost, bound / rho, 0).max(-1, keepdims=True))
         predicted = rho * scale
-    usable = np.isfinite(predicted).all(axis=-1, keepdims=True)
+    fine = np.isfinite(predicted).all(axis=-1, keepdims=True)
     raised = predicted if pixel_rule else np.where(lost, np.maximum(today, predicted),
                                                    measured)
-    raised = np.where(usable, raised, today)
-    crop[partly] = np.minimum(raised, np.finfo(np.float32).max)
-    # Stage 2: fully clipped pixels take their border's colour, their channel mean no
-    # lower than the neutral bound's and each channel no lower than its clip's bound.
+    crop[partly] = np.minimum(np.where(fine, raised, today), np.finfo(np.float32).max)
+    # Stage 2: fully clipped pixels take their border's colour (the partly clipped ones'
+    # now reconstructed), their channel mean no lower than the neutral bound's and each
+    # channel no lower than its clip's bound.
     if fully.any():
-        rho_full, _ = border_chromaticity(crop, fully, inside)
+        rho_full, _ = border_chromaticity(crop, fully, usable | partly)
         today = crop[fully].astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             scale = np.maximum(today.mean(-1) * channels, (bound / rho_full).max(-1))
             scaled = rho_full * scale[:, None]
-        usable = np.isfinite(scaled).all(axis=-1, keepdims=True)
-        crop[fully] = np.minimum(np.where(usable, scaled, today), np.finfo(np.float32).max)
-    return HighlightReport(partly=int(partly.sum()), fully=int(fully.sum()),
-                           regions=int(regions), pixels=int(any_clipped.size))
+        fine = np.isfinite(scaled).all(axis=-1, keepdims=True)
+        crop[fully] = np.minimum(np.where(fine, scaled, today), np.finfo(np.float32).max)
+    return int(partly.sum()), int(fully.sum()), int(regions)

@@ -25,6 +25,10 @@ from .compat import active_compositor_tree, compositor_tree, find_node_tree
 from .nodes import DISPLAY_VIEW, HdrioMergeNode, image_path, merge_node_name
 from .warmup import WARMUP
 
+# Built here, not in the annotation: Blender evaluates a property's annotation where a
+# comprehension does not see this module's names.
+HIGHLIGHT_ITEMS = [(mode, mode.capitalize(), HIGHLIGHT_HELP[mode]) for mode in HIGHLIGHT_MODES]
+
 
 def kernels_ready(operator: bpy.types.Operator) -> bool:
     """True once hdrio's kernels are compiled (:mod:`.warmup`). In the background (no UI
@@ -120,7 +124,7 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         name="Highlights", default="clip",
         description="Pixels with channels clipped in every bracket, as `hdrio merge "
                     "--highlights`",
-        items=[(mode, mode.capitalize(), HIGHLIGHT_HELP[mode]) for mode in HIGHLIGHT_MODES])
+        items=HIGHLIGHT_ITEMS)
     filter_image: bpy.props.BoolProperty(default=True, options={"HIDDEN"})  # type: ignore
 
     def invoke(self, context, event):
