@@ -206,17 +206,19 @@ def _reconstruct_box(crop: np.ndarray, codes: np.ndarray, limits: np.ndarray,
     colour; ``codes`` the shortest bracket's there. Returns the counts of partly and
     fully clipped pixels and of regions."""
     channels = crop.shape[-1]
-    clipped = codes >= limits
-    fully = region & clipped.all(axis=-1)
+    fully = region.copy()
+    for c in range(channels):
+        fully &= codes[..., c] >= limits[c]
     partly = region & ~fully
     # Stage 1: partly clipped pixels from their unclipped channels and the ring's ratios.
     rho, regions = border_chromaticity(crop, region, usable)
     rho = rho[partly[region]]
     today = crop[partly].astype(np.float64)
-    lost = clipped[partly]
+    partly_codes = codes[partly]
+    lost = partly_codes >= limits
     measured = today
     if pixel_rule:  # the neutral bound replaced the unclipped channels' measurements
-        measured = estimates[codes[partly], np.arange(channels)]
+        measured = estimates[partly_codes, np.arange(channels)]
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = (np.where(lost, 0, measured).sum(-1)
                  / np.where(lost, 0, rho).sum(-1))[:, None]
