@@ -19,23 +19,28 @@ neighbours' colour, after darktable's *inpaint opposed* highlight reconstruction
    away (the ring skips the pixels next to the clip, where a lossy codec's chroma and
    a lens's flare mix in the clip's false colour): the ring's channel sums over its
    sum of all channels, so its brightest pixels (the light's own glow) count most.
-2. A **partly clipped** pixel (some channel below its limit in the shortest bracket)
-   keeps its unclipped channels' measurements ``m_u`` (the merge's value, or under the
-   pixel rule the shortest bracket's own estimate, which the neutral bound replaced)
-   and gives each clipped channel ``k`` the value the ring's ratios predict,
-   ``rho_k * sum(m_u) / sum(rho_u)``, when that is above the lower bound the merge gave
-   it (a reconstruction only raises a clipped channel).
+2. A **partly clipped** pixel (some channel below its limit in the shortest bracket).
+   Per-channel rule: its unclipped channels keep their measurements ``m_u`` and each
+   clipped channel ``k`` becomes the value the ring's ratios predict,
+   ``rho_k * sum(m_u) / sum(rho_u)``, when that is above the merge's value (a clipped
+   channel is only raised). Pixel rule (the stack mixes its channels after the clip, so
+   a partly clipped pixel's other channels are biased too): the whole pixel takes the
+   ring's colour ``rho * sum(m_u) / sum(rho_u)``, ``m_u`` the shortest bracket's own
+   estimates (which the neutral bound had replaced), scaled up where a clipped channel
+   would fall below ``f^-1(limit) / dt``, the least its clip implies (the neutral bound
+   comes from codes above the limit, the shoulder the policy dropped as unreliable).
 3. A **fully clipped** pixel takes the chromaticity of the ring around its own fully
-   clipped region (where the ring's partly clipped pixels are already reconstructed),
-   scaled so that no channel is below the merge's value: ``rho * max_c(E_c / rho_c)``,
-   never darker than the neutral lower bound.
+   clipped region (where the partly clipped pixels are already reconstructed), scaled
+   so that its channel mean is no lower than the merge's neutral bound and no channel
+   below ``f^-1(limit) / dt``: never darker than the bound. (Every channel at or above
+   the neutral bound would scale a coloured border's hue until its smallest channel
+   reaches it: on frobisher_001, a bright yellow cloud; docs/highlights.md.)
 
-Chromaticities are floored at 1/20 of their largest channel (a fully clipped pixel's
-scale, and so its brightening, is at most 20x the bound). A region with no unclipped
-pixel around it stays as the merge left it. Only the bounding box of the clipped pixels
-(plus the ring) is looked at; an image with no clipped pixel is left untouched (the skip
-:attr:`hdrio.skips.SkipReport.highlights`). Greyscale stacks have no other channel to
-reconstruct from and are left as they are.
+Chromaticities are floored at 1/20 of their largest channel. A region with no unclipped
+pixel around it stays as the merge left it. Only boxes around groups of 32-px blocks
+that hold clipped pixels are looked at (:func:`clip_groups`); an image with no clipped
+pixel is left untouched (the skip :attr:`hdrio.skips.SkipReport.highlights`). Greyscale
+stacks have no other channel to reconstruct from and are left as they are.
 """
 
 from __future__ import annotations
@@ -125,8 +130,9 @@ def border_chromaticity(values: np.ndarray, mask: np.ndarray,
     rho : ndarray, (N, C) float64
         For the ``N`` true pixels of ``mask`` (row-major order): the chromaticity (sums
         to 1, each channel at least 1/20 of the largest) of the ring :data:`RING` around
-        the pixel's 8-connected region, weighted by brightness; NaN where the ring has
-        no positive pixel.
+        the pixel's 8-connected region, weighted by brightness (a ring pixel within
+        8 px of two regions counts for one of them); NaN where the ring has no positive
+        pixel.
     regions : int
         The number of regions.
     """
