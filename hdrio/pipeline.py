@@ -30,7 +30,7 @@ from hdrio.io.masks import mask_files, read_masks
 from hdrio.io.paths import check_inputs, check_outputs
 from hdrio.io.raw import is_raw, is_raw_stack, xyz_to_working
 from hdrio.io.write import HALF_MAX, write_exr, write_preview
-from hdrio.merge.debevec1997 import MergeStatistics, clipped_everywhere_mask
+from hdrio.merge.debevec1997 import MergeStatistics, clipped_everywhere_mask, estimate_tables
 from hdrio.merge.estimators import (
     MERGE_METHODS,
     NOISE_AWARE,
@@ -39,6 +39,7 @@ from hdrio.merge.estimators import (
 )
 from hdrio.merge.exclusion import colour_exclusion, either, masked_statistics, remerge_excluded
 from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.highlights import HIGHLIGHT_MODES, HighlightReport, reconstruct_highlights
 from hdrio.merge.ladder import (
     in_brightness_order,
     infer_exposures,
@@ -113,6 +114,9 @@ class MergeOptions:
     deghost: str = "auto"
     motion_layer: bool = False  # the deghosting mask as an EXR channel "motion.Y"
     clip_mask: bool = False  # pixels clipped in every bracket as an EXR channel "clipped.Y"
+    # clip | reconstruct: channels clipped in every bracket estimated from the unclipped
+    # ones and the neighbours' colour (hdrio.merge.highlights); clip leaves the bounds.
+    highlights: str = "clip"
 
     def __post_init__(self) -> None:
         check_fields(self, MERGE_NUMBERS)  # --lambda, --samples, --seed: before any work
@@ -163,6 +167,8 @@ class MergeResult:
     nd: NDReport | None = None
     unseen: np.ndarray | None = None
     """``(H, W)`` bool: excluded in every bracket (radiance 0, alpha 0), else ``None``."""
+    highlights: HighlightReport | None = None
+    """What ``--highlights reconstruct`` changed (``None``: not asked, or nothing clipped)."""
 
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
@@ -210,6 +216,9 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     """
     say = progress or (lambda message: None)
     check_modes(options.align, options.deghost)
+    if options.highlights not in HIGHLIGHT_MODES:
+        raise ValueError(f"highlights {options.highlights!r}: choose from "
+                         f"{', '.join(HIGHLIGHT_MODES)}")
     skips = options.skips
     skipped = SkipReport(dropped=list(stack.dropped))
     clock = PhaseClock()
@@ -343,6 +352,17 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
                      not statistics.pixel_rule)  # the policy's rule, at Z_max
     clock.lap("deghost")
+    highlights = None
+    if options.highlights == "reconstruct":
+        say("reconstructing highlights clipped in every bracket")
+        highlights = reconstruct_highlights(
+            radiance, merged.codes[0],
+            statistics.limits or (merged.code_max,) * merged.shape[2],
+            estimate_tables(response, merged.channel_exposures, "linear")[0],
+            statistics.pixel_rule,
+            None if excluded is None or merged is not stack else ~excluded[0])
+        skipped.highlights = highlights is None
+        clock.lap("highlights")
     uncertainty = None
     if options.uncertainty:
         say("predicting each pixel's uncertainty")
@@ -360,7 +380,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
                        cpu_timings=clock.cpu, colour=colour,
                        skipped=skipped, noise=noise, uncertainty=uncertainty,
                        motion=motion, exposures=exposure_check, nd=nd_report,
-                       unseen=unseen if unseen is not None and unseen.any() else None)
+                       unseen=unseen if unseen is not None and unseen.any() else None,
+                       highlights=highlights)
 
 
 def half_safe_scale(radiance: np.ndarray) -> float:
@@ -399,7 +420,10 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:mergeDomain": merge_domain(options.merge),
         "hdrio:saturation": options.saturation,
         "hdrio:clippedFraction": result.statistics.clipped_fraction,
+        "hdrio:highlights": options.highlights,
     }
+    if result.highlights is not None:
+        attributes["hdrio:highlightsReconstructed"] = result.highlights.text()
     if result.statistics.limits:
         attributes["hdrio:saturationRule"] = saturation_rule(result.statistics)
         attributes["hdrio:saturationLimits"] = ", ".join(
@@ -407,7 +431,9 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
                                                       result.statistics.limits))
     if options.clip_mask:
         attributes["hdrio:clipMask"] = ("layer clipped: 1 where the pixel is clipped in "
-                                        "every bracket (merged to a neutral lower bound)")
+                                        "every bracket (merged to a neutral lower bound"
+                                        + (", then reconstructed" if result.highlights
+                                           else "") + ")")
     attributes.update(capture_attributes(stack))
     if result.exposures is not None:
         attributes.update(result.exposures.attributes())

@@ -94,6 +94,9 @@ class SkipReport:
     """Fraction of pixel-brackets the merge kernel never read."""
     warp: bool = False
     """``--align auto`` measured every bracket within 0.1 px and did not resample."""
+    highlights: bool = False
+    """``--highlights reconstruct`` found no pixel clipped in every bracket: nothing to do
+    (reported, not a choice: there is no work to turn back on)."""
 
     def lines(self, channels: int) -> list[str]:
         said = []
@@ -108,6 +111,8 @@ class SkipReport:
                         "(identical channels)")
         if self.warp:
             said.append("alignment warp (every bracket within 0.1 px of the reference)")
+        if self.highlights:
+            said.append("highlight reconstruction (no pixel clipped in every bracket)")
         if self.early_stop_fraction > 0:
             said.append(f"{100 * self.early_stop_fraction:.1f} % of the merge "
                         "(rows saturated in a shorter bracket)")

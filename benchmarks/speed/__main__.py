@@ -53,6 +53,9 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
         "merge: hdrio (inverse-variance, auto saturation) / (channel saturation)":
             _ratio(rows, "hdrio merge (inverse-variance)",
                    "hdrio merge (inverse-variance, channel saturation)"),
+        "merge: hdrio (inverse-variance, highlights reconstruct) / (inverse-variance)":
+            _ratio(rows, "hdrio merge (inverse-variance, highlights reconstruct)",
+                   "hdrio merge (inverse-variance)"),
         "merge: hdrio (log) / floor": _ratio(rows, "hdrio merge (log)",
                                              "floor (copy of the codes, all cores)"),
         "merge: hdrio (linear) / floor": _ratio(rows, "hdrio merge (linear)",

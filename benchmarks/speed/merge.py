@@ -11,10 +11,20 @@ import numpy as np
 from benchmarks.speed.floor import parallel_copy
 from benchmarks.speed.scene import true_response
 from benchmarks.timing import measure_alternately, measure_call
-from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.merge.debevec1997 import estimate_tables, merge_brackets
 from hdrio.merge.estimators import MERGE_METHODS
+from hdrio.merge.highlights import reconstruct_highlights
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import radiance_error, well_exposed
+
+
+def reconstructed(stack: ExposureStack, response) -> np.ndarray:
+    """The default merge, then ``--highlights reconstruct`` (as ``merge_stack`` calls it)."""
+    radiance, statistics = MERGE_METHODS["inverse-variance"](stack, response)
+    reconstruct_highlights(radiance, stack.codes[0], statistics.limits,
+                           estimate_tables(response, stack.channel_exposures, "linear")[0],
+                           statistics.pixel_rule)
+    return radiance
 
 
 def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
@@ -42,12 +52,16 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
                                                   saturation="pixel")[0],
         "inverse-variance, channel saturation": lambda: MERGE_METHODS["inverse-variance"](
             stack, response, saturation="channel")[0],
+        # --highlights reconstruct (hdrio.merge.highlights): the scene's clipped pixels
+        # (0.06 %, 16 sun glints spread over the tiled frame) reconstructed after the merge.
+        "inverse-variance, highlights reconstruct": lambda: reconstructed(stack, response),
     }, repeats)
     destination = None
     rows.append({"row": "merge", "method": "floor (copy of the codes, all cores)",
                  "seconds": timings["floor"].seconds, "peak_mb": timings["floor"].peak_mb})
     for domain in ("log", "linear", "inverse-variance", "log, pixel rule",
-                   "inverse-variance, channel saturation"):
+                   "inverse-variance, channel saturation",
+                   "inverse-variance, highlights reconstruct"):
         timing = timings[domain]
         error = radiance_error(timing.result, radiance, mask)
         rows.append({"row": "merge", "method": f"hdrio merge ({domain})",

@@ -154,13 +154,16 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
         f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
-        f"bracket {100 * stats.clipped_fraction:.2f} % (a neutral lower "
-        f"bound{', layer clipped.Y' if result.options.clip_mask else ''}), black in every "
+        f"bracket {100 * stats.clipped_fraction:.2f} % ("
+        + ("reconstructed" if result.highlights else "a neutral lower bound")
+        + f"{', layer clipped.Y' if result.options.clip_mask else ''}), black in every "
         f"bracket {100 * stats.black_everywhere / stats.pixels:.2f} %"
         + (f"; masked in every bracket {100 * stats.masked_everywhere / stats.pixels:.2f} "
            "% (alpha 0, not counted)" if stats.masked_everywhere else ""),
         f"clipping:  --saturation {result.options.saturation}, {saturation_rule(stats)}"
         + (f" (limits {', '.join(str(v) for v in stats.limits)})" if stats.limits else ""),
+        *([f"highlight: {result.highlights.text()}, {times['highlights']:.2f} s"]
+          if result.highlights else []),
         *motion_lines(result),
         *[f"nd:        {line}" for line in (result.nd.lines() if result.nd else [])],
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],

@@ -54,6 +54,7 @@ from hdrio.cli.values import (
     whole,
 )
 from hdrio.errors import HdrioError
+from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
 from hdrio.merge.saturation import SATURATION_POLICIES
 
 __all__ = ["MERGE_OPTIONS", "OPTIONS_BY_NAME", "Option", "add_arguments", "merge_method",
@@ -190,6 +191,11 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--clip-mask", (), "clip_mask", flag, example=(),
            help="also write the pixels clipped in every bracket (merged to a neutral "
                 "lower bound) as the EXR channel clipped.Y, counted by hdrio check"),
+    Option("--highlights", ("MODE",), "highlights", choice(*HIGHLIGHT_MODES),
+           example=("reconstruct",),
+           help="pixels with channels clipped in every bracket: 'clip' (default: "
+                f"{HIGHLIGHT_HELP['clip']}) or 'reconstruct' ({HIGHLIGHT_HELP['reconstruct']}"
+                "; a clipped channel never below its clip's lower bound; docs/highlights.md)"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
            help="keep pixels of this code value out of the solve and the merge (e.g. "

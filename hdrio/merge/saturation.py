@@ -31,7 +31,9 @@ on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 Pixels dropped even from the shortest bracket (clipped in every bracket) take a neutral
 lower bound in the kernel (:func:`hdrio.merge.kernel.merge_kernel`): every channel the
-largest of the shortest bracket's estimates, so they carry no colour cast.
+largest of the shortest bracket's estimates, so they carry no colour cast;
+``--highlights reconstruct`` (:mod:`hdrio.merge.highlights`) estimates them from their
+neighbours' colour instead.
 """
 
 from __future__ import annotations

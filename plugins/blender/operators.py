@@ -16,6 +16,7 @@ from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
+from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
 from hdrio.pipeline import MergeOptions, merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
 
@@ -23,6 +24,10 @@ from .baking import response_to_json
 from .compat import active_compositor_tree, compositor_tree, find_node_tree
 from .nodes import DISPLAY_VIEW, HdrioMergeNode, image_path, merge_node_name
 from .warmup import WARMUP
+
+# Built here, not in the annotation: Blender evaluates a property's annotation where a
+# comprehension does not see this module's names.
+HIGHLIGHT_ITEMS = [(mode, mode.capitalize(), HIGHLIGHT_HELP[mode]) for mode in HIGHLIGHT_MODES]
 
 
 def kernels_ready(operator: bpy.types.Operator) -> bool:
@@ -115,6 +120,11 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
     overwrite: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Overwrite", default=False, options={"SKIP_SAVE"},
         description="Replace the output EXR if it exists")
+    highlights: EnumProperty(  # type: ignore[valid-type]
+        name="Highlights", default="clip",
+        description="Pixels with channels clipped in every bracket, as `hdrio merge "
+                    "--highlights`",
+        items=HIGHLIGHT_ITEMS)
     filter_image: bpy.props.BoolProperty(default=True, options={"HIDDEN"})  # type: ignore
 
     def invoke(self, context, event):
@@ -140,7 +150,8 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
             return {"CANCELLED"}
         exposures = self.exposures.replace(",", " ").split() or None
         try:
-            merge_files(paths, output, exposures=exposures, options=MergeOptions())
+            merge_files(paths, output, exposures=exposures,
+                        options=MergeOptions(highlights=self.highlights))
         except InputError as error:
             if "no exposure time" in error.problem:  # hdrio's words name a CLI option
                 self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "

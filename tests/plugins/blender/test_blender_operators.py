@@ -233,3 +233,23 @@ def test_tonemap_local_operator_matches_hdrio(tmp_path):
     reference = TONEMAP_METHODS["reinhard-local"](radiance)
     # Same function on the same float32 pixels: only float32 rounding may differ.
     assert np.allclose(display, reference, rtol=1e-5, atol=1e-6)
+
+
+def test_merge_to_exr_highlights_option_is_hdrio_merges(shared_data, tmp_path):
+    # The add-on's Highlights is `hdrio merge --highlights`: same name, same EXR.
+    folder = shared_data("frobisher_001")
+    names = sorted(p.name for p in folder.glob("*.jpg"))
+    paths = [str(folder / name) for name in names]
+    cli_output = tmp_path / "cli.exr"
+    assert hdrio_main(["merge", *paths, "-o", str(cli_output), "-q",
+                       "--highlights", "reconstruct"]) == 0
+    blender_output = tmp_path / "blender.exr"
+    clean_compositor(bpy.context.scene)
+    assert bpy.ops.hdrio.merge_to_exr(
+        directory=str(folder), files=[{"name": name} for name in names],
+        output=str(blender_output), highlights="reconstruct") == {"FINISHED"}
+    cli_pixels, cli_attributes = read_exr(cli_output)
+    pixels, attributes = read_exr(blender_output)
+    assert np.array_equal(pixels, cli_pixels)
+    assert attributes["hdrio:highlights"] == "reconstruct"
+    assert "reconstructed" in attributes["hdrio:highlightsReconstructed"]
