@@ -117,6 +117,11 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         description="Exposure of each selected file in seconds, in the order of the file "
                     "names, as `hdrio merge --exposures` (e.g. 1/8 1 8); empty: from the "
                     "files' EXIF or names")
+    exposures_from_data: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Exposures From Data", default=False,
+        description="Merge with each bracket's exposure estimated from the pixels, as "
+                    "`hdrio merge --exposures-from-data`: corrects EXIF that is off, and "
+                    "infers the exposures of files with none (relative, step found)")
     overwrite: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Overwrite", default=False, options={"SKIP_SAVE"},
         description="Replace the output EXR if it exists")
@@ -151,12 +156,14 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         exposures = self.exposures.replace(",", " ").split() or None
         try:
             merge_files(paths, output, exposures=exposures,
-                        options=MergeOptions(highlights=self.highlights))
+                        options=MergeOptions(highlights=self.highlights,
+                                             exposures_from_data=self.exposures_from_data))
         except InputError as error:
             if "no exposure time" in error.problem:  # hdrio's words name a CLI option
                 self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "
                                        "in the file name): type them in Exposures, in the "
-                                       "file browser's side panel (e.g. 1/8 1 8)")
+                                       "file browser's side panel (e.g. 1/8 1 8), or tick "
+                                       "Exposures From Data")
             else:
                 self.report({"ERROR"}, str(error))
             return {"CANCELLED"}

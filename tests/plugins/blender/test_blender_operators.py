@@ -220,6 +220,23 @@ def test_merge_to_exr_reports_bad_input_in_blender_words(write_brackets, tmp_pat
     assert attributes["hdrio:exposureSource"] == "explicit"
 
 
+def test_merge_to_exr_exposures_from_data_is_hdrio_merges(write_brackets, tmp_path):
+    # Exposures From Data is `hdrio merge --exposures-from-data`: files with no exposure
+    # anywhere are merged with inferred, relative exposures; the same EXR either way.
+    paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
+    cli_output = tmp_path / "cli.exr"
+    assert hdrio_main(["merge", *map(str, paths), "-o", str(cli_output), "-q",
+                       "--exposures-from-data"]) == 0
+    blender_output = tmp_path / "blender.exr"
+    assert bpy.ops.hdrio.merge_to_exr(
+        directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+        output=str(blender_output), exposures_from_data=True) == {"FINISHED"}
+    cli_pixels, cli_attributes = read_exr(cli_output)
+    pixels, attributes = read_exr(blender_output)
+    assert np.array_equal(pixels, cli_pixels)
+    assert attributes["hdrio:exposuresInferred"] == cli_attributes["hdrio:exposuresInferred"]
+
+
 def test_tonemap_local_operator_matches_hdrio(tmp_path):
     radiance = demo_scene(48, 64)
     source = write_exr(tmp_path / "scene.exr", radiance, pixel_type="float")
