@@ -141,13 +141,15 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
 
 def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
-                 motion: Motion, weights: np.ndarray, domain: str, per_channel: bool) -> None:
+                 motion: Motion, weights: np.ndarray, domain: str, per_channel: bool,
+                 limits: tuple[int, ...]) -> None:
     """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
     bracket (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights
-    (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain``."""
+    (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain`` and its
+    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`)."""
     if motion.keep is None:
         return
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     weights)
     remerge_masked(stack.codes, motion.keep, CELL, terms, estimates, stack.code_max,
-                   per_channel, domain == "log", radiance)
+                   per_channel, domain == "log", radiance, limits)
