@@ -233,21 +233,14 @@ def _consistency(start, stop, codes, estimates, variance, dark_bound, dark_varia
                                         continue  # next to clipping: says nothing
                                     total += min(d2, cap)
                                     used += 1
-                                    if bounded[c] and d2 <= suspect:  # within: j takes over
-                                        chain_var[c] = v
-                                        chain[c] = j
-                                        bounded[c] = False
-                                        if resampled:
-                                            low[c], high_e[c] = _local_range(
-                                                codes, estimates, variance, j, y, x, c)
-                                        else:
-                                            low[c] = high_e[c] = e
-                                    continue
-                                # The reference is clipped or black here: j takes over.
+                                    if not bounded[c] or d2 > suspect:
+                                        continue
+                                    bounded[c] = False  # within the dark bound
+                                elif direction < 0:  # a shorter bracket for a clipped one
+                                    takeovers[j, cy, cx] += 1
+                                # j takes over as the reference here.
                                 chain_var[c] = v
                                 chain[c] = j
-                                if direction < 0:  # a shorter bracket for a clipped one
-                                    takeovers[j, cy, cx] += 1
                                 if resampled:
                                     low[c], high_e[c] = _local_range(
                                         codes, estimates, variance, j, y, x, c)

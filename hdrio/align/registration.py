@@ -314,8 +314,6 @@ def align_masks(masks: np.ndarray, alignment: Alignment) -> np.ndarray:
     moved onto the reference as :func:`align_stack` moves the codes: the nearest pixel,
     grown by 2 pixels, the reach of the cubic interpolation (a warped code within it
     took some of an excluded one)."""
-    import scipy.ndimage
-
     out = masks.copy()
     for j in range(masks.shape[0]):
         if j == alignment.reference or alignment.motion[j] == 0.0:

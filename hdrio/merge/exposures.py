@@ -188,7 +188,6 @@ class ExposureCheck:
                 "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                 "hdrio:exposuresFromData": int(self.used)}
 
-
     @property
     def units(self) -> str:
         """What the exposures are measured in (seconds, unless inferred)."""

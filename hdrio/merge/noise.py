@@ -232,7 +232,8 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
             spread = _MAD_TO_SIGMA * group_medians(np.abs(difference - centre[bins]), bins,
                                                    _BINS)
             order, edges = group_edges(bins, _BINS)
-            counted = (np.diff(edges) >= _MIN_PER_BIN) & (spread > 0)
+            sizes = np.diff(edges)
+            counted = (sizes >= _MIN_PER_BIN) & (spread > 0)
             if not counted.any():
                 continue
             mean_e = group_means(radiance, order, edges)[counted]
@@ -242,7 +243,7 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
                                      np.full(mean_e.size, 1 / ts**2 + 1 / tl**2),
                                      slope_short / ts**2 + slope_long / tl**2]).tolist()
             targets += (spread[counted] ** 2).tolist()
-            counts += np.diff(edges)[counted].tolist()
+            counts += sizes[counted].tolist()
         if len(rows) < 3:
             continue
         A, y, n = np.asarray(rows), np.asarray(targets), np.asarray(counts, np.float64)
