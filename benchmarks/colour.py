@@ -24,7 +24,8 @@ from hdrio.cms.luminance import luminance
 from hdrio.cms.lut import export_response
 from hdrio.imageops import read_image
 from hdrio.io.brackets import read_codes
-from hdrio.pipeline import MergeOptions, merge_files
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files
 
 TARGETS = (("ACEScg", "ACEScg"), ("ACES2065-1", "ACES2065-1"),
            ("lin_p3d65_scene", "Display P3"), ("lin_rec2020_scene", "ITU-R BT.2020"),

@@ -42,8 +42,9 @@ from hdrio.align.registration import reference_bracket
 from hdrio.align.warp import warp_codes
 from hdrio.io.staging import budget_bytes, codes_buffer, release
 from hdrio.merge.noise import fit_noise
+from hdrio.merge_job import MergeOptions
 from hdrio.parallel import threads
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 
 

@@ -21,7 +21,8 @@ from benchmarks.truth.curves import load_curve
 from benchmarks.truth.methods import exposure_stack
 from benchmarks.truth.scenes import data_folder, read_scene
 from benchmarks.truth.stacks import render_stack
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.synthetic import radiance_error
 
 CURVES = ("dorf0", "dorf100")

@@ -27,7 +27,7 @@ _EXPORTS = {
     "MERGE_METHODS": "hdrio.merge.estimators", "WEIGHTING_METHODS": "hdrio.merge.weighting",
     "merge_brackets": "hdrio.merge.debevec1997",
     "TONEMAP_METHODS": "hdrio.tonemap",
-    "MergeOptions": "hdrio.pipeline", "MergeResult": "hdrio.pipeline",
+    "MergeOptions": "hdrio.merge_job", "MergeResult": "hdrio.merge_job",
     "merge_files": "hdrio.pipeline", "merge_stack": "hdrio.pipeline",
 }
 __all__ = sorted(_EXPORTS)

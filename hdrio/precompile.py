@@ -40,7 +40,7 @@ def _compile_motion() -> None:
 
 
 def _compile_preview(operator: str) -> None:
-    from hdrio.pipeline import render_preview
+    from hdrio.tonemap.preview import render_preview
 
     render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
 

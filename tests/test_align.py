@@ -12,7 +12,8 @@ from hdrio.align.lucaskanade import corner_motion
 from hdrio.align.registration import align_stack, estimate_alignment, reference_bracket
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import radiance_error, well_exposed
 

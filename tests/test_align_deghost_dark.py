@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage
 
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import gamma_inverse_response, render_brackets
 

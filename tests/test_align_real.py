@@ -6,7 +6,9 @@ import pytest
 
 from hdrio.align.registration import estimate_alignment
 from hdrio.io.brackets import read_brackets
-from hdrio.pipeline import MergeOptions, exr_attributes, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.merge_output import exr_attributes
+from hdrio.pipeline import merge_stack
 
 AUTO = MergeOptions(align="auto", deghost="auto")  # the defaults, spelt out
 

@@ -12,7 +12,9 @@ import pytest
 from hdrio.cms.calibration import Calibration
 from hdrio.io.header import read_header
 from hdrio.io.write import Float2, write_image
-from hdrio.pipeline import MergeOptions, exr_attributes, merge_files
+from hdrio.merge_job import MergeOptions
+from hdrio.merge_output import exr_attributes
+from hdrio.pipeline import merge_files
 from hdrio.synthetic import render_brackets
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,7 +18,8 @@ from hdrio.cms.luminance import luminance
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.header import read_header
-from hdrio.pipeline import MergeOptions, merge_files, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files, merge_stack
 
 EXPOSURES = (1 / 16, 1 / 4, 1.0, 4.0)
 

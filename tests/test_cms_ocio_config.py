@@ -17,7 +17,8 @@ import pytest
 from hdrio.cms import lut, ocioconfig, spaces
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_codes
-from hdrio.pipeline import MergeOptions, merge_files
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "ocio" / "config.ocio"

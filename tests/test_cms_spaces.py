@@ -13,7 +13,8 @@ from hdrio.cms.luminance import KNOWN_CHROMATICITIES, normalised_primary_matrix
 from hdrio.errors import HdrioError
 from hdrio.imageops import read_image
 from hdrio.io.header import read_header
-from hdrio.pipeline import MergeOptions, merge_files
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files
 
 RNG = np.random.default_rng(5)
 # Scene-linear values from deep shadow to bright highlights, some saturated colours.

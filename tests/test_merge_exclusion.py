@@ -14,7 +14,8 @@ from hdrio.errors import HdrioError
 from hdrio.io.masks import mask_files, read_masks
 from hdrio.merge.debevec1997 import MergeStatistics
 from hdrio.merge.exclusion import masked_statistics
-from hdrio.pipeline import MergeOptions, merge_paths
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_paths
 from tests.conftest import run_cli as run
 
 

@@ -11,7 +11,8 @@ import pytest
 
 from hdrio.io.write import write_image
 from hdrio.merge.exposures import anchor_Theil_Sen
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import gamma_response, render_brackets
 from tests.conftest import run_cli as run

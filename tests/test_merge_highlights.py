@@ -8,7 +8,8 @@ import pytest
 
 from hdrio.merge.debevec1997 import clipped_everywhere_mask
 from hdrio.merge.highlights import border_chromaticity
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import gamma_inverse_response, hue_angle_error, render_brackets
 

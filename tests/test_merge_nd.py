@@ -9,7 +9,8 @@ import pytest
 from hdrio.errors import HdrioError
 from hdrio.io.write import write_image
 from hdrio.merge.nd import NDFilter, nd_stops, parse_nd
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from tests.conftest import run_cli as run
 from tests.nd_scene import CARD_PATCH, PATCH, sun_brackets, sun_scene

@@ -26,7 +26,8 @@ from hdrio.merge.noise import (
     usable_codes,
 )
 from hdrio.merge.uncertainty import relative_uncertainty
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 from hdrio.synthetic import (
@@ -140,7 +141,7 @@ def test_estimators_merge_to_finite_positive_radiance(demo, method):
 
 
 def test_header_records_the_estimator_and_the_noise_model(demo):
-    from hdrio.pipeline import exr_attributes
+    from hdrio.merge_output import exr_attributes
 
     _, stack, _ = demo
     attributes = exr_attributes(merge_stack(stack, MergeOptions()))

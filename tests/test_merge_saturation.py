@@ -165,7 +165,8 @@ def _frobisher() -> list[Path]:
 def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
     from hdrio.cms.checks import check_exr
     from hdrio.io.header import read_header
-    from hdrio.pipeline import MergeOptions, merge_files
+    from hdrio.merge_job import MergeOptions
+    from hdrio.pipeline import merge_files
 
     output = tmp_path / "f.exr"
     result = merge_files(_frobisher(), output, options=MergeOptions(clip_mask=True),
@@ -198,7 +199,8 @@ def test_clip_mask_round_trip_and_check_summary(tmp_path):
     from hdrio.cms.checks import check_exr, format_report
     from hdrio.demo import write_demo_brackets
     from hdrio.merge.debevec1997 import clipped_everywhere_mask
-    from hdrio.pipeline import MergeOptions, merge_files
+    from hdrio.merge_job import MergeOptions
+    from hdrio.pipeline import merge_files
 
     _, files = write_demo_brackets(tmp_path)
     output = tmp_path / "demo.exr"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from hdrio.errors import HdrioError
+from hdrio.merge_job import MergeOptions
 from hdrio.numbers import NumberError, check_number, check_tonemap_parameters
-from hdrio.pipeline import MergeOptions
 
 
 @pytest.mark.parametrize("value, problem", [

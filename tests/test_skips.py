@@ -20,7 +20,8 @@ from benchmarks.speed.scene import (
 from hdrio.io import brackets as brackets_module
 from hdrio.io.brackets import read_brackets
 from hdrio.io.write import write_image
-from hdrio.pipeline import MergeOptions, merge_files, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files, merge_stack
 from hdrio.response import response_Debevec1997
 from hdrio.skips import COVERING, SKIPS, classify, well_exposed_codes
 from hdrio.synthetic import radiance_error

@@ -23,7 +23,8 @@ from benchmarks.speed.scene import (
 )
 from benchmarks.timing import measure_alternately
 from hdrio.merge.debevec1997 import merge_brackets
-from hdrio.pipeline import MergeOptions, merge_files, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_files, merge_stack
 from hdrio.response import response_Debevec1997
 from hdrio.response.stored import read_response
 

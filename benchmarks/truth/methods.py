@@ -20,7 +20,8 @@ from benchmarks.truth.report import NOISE_ORACLE
 from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE, Stack
 from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 

@@ -18,7 +18,7 @@ from hdrio.batch.partial import clean_partials
 from hdrio.batch.plan import RUN, SetTask, plan_sets
 from hdrio.batch.pool import OnResult, SetResult, Work, run_local
 from hdrio.errors import HdrioError
-from hdrio.pipeline import MergeOptions
+from hdrio.merge_job import MergeOptions
 
 
 def run_sets(tasks: Sequence[SetTask], work: Work, *, client: Any = None,

@@ -3,7 +3,7 @@
 Each entry of :data:`hdrio.cli.options.MERGE_OPTIONS` becomes a chain operation that
 sets up the next ``--merge`` (``hdrio a.jpg b.jpg c.jpg --lambda 10 --merge -o out.exr``),
 so both front ends take the same options with the same names and meanings and build the
-same :class:`~hdrio.pipeline.MergeOptions`. Two entries are spelled differently here:
+same :class:`~hdrio.merge_job.MergeOptions`. Two entries are spelled differently here:
 the merge domain is ``--merge``'s own optional argument, and ``--colorspace`` (an image
 operation too) is registered by :mod:`hdrio.cli.chain_colour`.
 """
@@ -91,13 +91,8 @@ def _optional_domain(token: str) -> bool:
                 "same names: --lambda, --weighting, --uncertainty, --colorspace...)",
            example="a.jpg b.jpg c.jpg --lambda 10 --merge log -o out.exr")
 def _merge(chain: Chain, domain: str | None) -> None:
-    from hdrio.pipeline import (
-        exr_attributes,
-        merge_alpha,
-        merge_layers,
-        merge_paths,
-        output_pixels,
-    )
+    from hdrio.merge_output import exr_attributes, merge_alpha, merge_layers, output_pixels
+    from hdrio.pipeline import merge_paths
 
     if not chain.brackets:
         raise ChainError("no brackets to merge: give the bracket files before --merge")

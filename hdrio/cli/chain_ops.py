@@ -127,7 +127,7 @@ def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
     from hdrio.cms.luminance import DEFAULT_SPACE
     from hdrio.cms.spaces import colour_science_name
     from hdrio.cms.stage import display_attributes
-    from hdrio.pipeline import render_preview
+    from hdrio.tonemap.preview import render_preview
 
     name, parameters = value
     image = needs_scene_linear(chain)

@@ -87,7 +87,7 @@ def _check_output(chain: Chain, text: str) -> None:
            example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
     from hdrio.io.write import write_exr, write_preview
-    from hdrio.pipeline import write_radiance
+    from hdrio.merge_output import write_radiance
 
     image = chain.top()
     path = output_path(chain, text)

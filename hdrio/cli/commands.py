@@ -18,7 +18,9 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
-from hdrio.pipeline import MergeOptions, MergeResult, merge_files, saturation_rule
+from hdrio.merge_job import MergeOptions, MergeResult
+from hdrio.merge_output import saturation_rule
+from hdrio.pipeline import merge_files
 from hdrio.tonemap import TONEMAP_METHODS
 
 

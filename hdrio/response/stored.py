@@ -58,7 +58,7 @@ def _number(header: dict, name: str, default: float) -> float:
 
 
 def response_from_header(header: dict, source: str = "<header>") -> CameraResponse:
-    """Rebuild the :class:`CameraResponse` written by :func:`hdrio.pipeline.exr_attributes`.
+    """Rebuild the :class:`CameraResponse` written by :func:`hdrio.merge_output.exr_attributes`.
 
     Level ``k`` of the stored curves is code ``k * codeMax / (levels - 1)``; codes between
     levels are interpolated linearly in ``g`` (natural-log units). Raises

@@ -1,7 +1,7 @@
 """Bake hdrio's merge into the tables the compositor's RGB Curves nodes hold.
 
 No ``bpy`` here: this module turns a :class:`hdrio.CameraResponse`, the brackets'
-exposures and hdrio's :class:`~hdrio.pipeline.MergeOptions` into plain arrays, so it is
+exposures and hdrio's :class:`~hdrio.merge_job.MergeOptions` into plain arrays, so it is
 tested without Blender.
 
 The tables come from hdrio's own merge (:func:`hdrio.merge.debevec1997.merge_tables`,
@@ -29,7 +29,7 @@ import numpy as np
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.estimators import MERGE_METHODS, NOISE_AWARE, effective_weights, merge_domain
 from hdrio.merge.noise import NoiseModel
-from hdrio.pipeline import MergeOptions
+from hdrio.merge_job import MergeOptions
 from hdrio.response.curve import CameraResponse
 from hdrio.response.linear import linear_response
 

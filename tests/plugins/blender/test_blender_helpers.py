@@ -12,7 +12,8 @@ import pytest
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.merge.noise import NoiseModel
-from hdrio.pipeline import MergeOptions, merge_stack
+from hdrio.merge_job import MergeOptions
+from hdrio.pipeline import merge_stack
 from hdrio.response.curve import CameraResponse
 from plugins.blender.baking import (
     CURVE_TABLE_SIZE,

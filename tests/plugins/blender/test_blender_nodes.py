@@ -25,7 +25,7 @@ import plugins.blender as addon  # noqa: E402
 from hdrio.io.brackets import read_brackets  # noqa: E402
 from hdrio.io.write import write_exr  # noqa: E402
 from hdrio.merge import MERGE_METHODS, fit_noise  # noqa: E402
-from hdrio.pipeline import MergeOptions  # noqa: E402
+from hdrio.merge_job import MergeOptions  # noqa: E402
 from hdrio.response.curve import CameraResponse  # noqa: E402
 from hdrio.synthetic import demo_scene  # noqa: E402
 from plugins.blender.baking import response_to_json  # noqa: E402
