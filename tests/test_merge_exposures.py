@@ -336,3 +336,80 @@ def test_real_sets_stripped_of_metadata(shared_data, tmp_path):
         Path(f).stem for f in listed.stack.files]
     np.testing.assert_allclose(np.diff(np.log2(inferred.stack.exposures)),
                                np.diff(np.log2(listed.stack.exposures)), atol=0.01)
+
+
+# ------------------------------------- some files with EXIF, some without (partial metadata)
+
+
+def _partly_known(codes: np.ndarray, times: np.ndarray, known: dict[int, float]
+                  ) -> ExposureStack:
+    """The stack as read with no exposure for some files: placeholders, source "data",
+    an EXIF exposure time only for the brackets in ``known`` (index: seconds)."""
+    count = len(times)
+    return ExposureStack.from_arrays(
+        codes, np.arange(1.0, count + 1), files=[f"f{j}.png" for j in range(count)],
+        exposure_sources=["data"] * count,
+        metadata=[{"ExposureTime": known[j]} if j in known else {} for j in range(count)])
+
+
+def test_some_brackets_with_exif_fix_the_step_and_the_unit(shared_data):
+    """A toe-heavy curve (DoRF 200) fools the starting sRGB curve: with no metadata the
+    step comes out 2 1/3 stops for 2. Two brackets that kept their EXIF time fix it
+    (the exponent ambiguity) and the unit: every exposure within 1/50 stop of the truth
+    in seconds (measured 0.000); one fixes the unit only (that bracket exact)."""
+    shared_data("openexr_scenes"), shared_data("crf_database")
+    codes, times, _ = _ladder("StillLife", "dorf200", (2.0,) * 4)
+    none = merge_stack(_partly_known(codes, times, {}), OFF_PIPELINE)
+    assert none.exposures.inferred == "step inferred: 2 1/3 stops"
+    for known in ({0: times[0], 4: times[4]}, {1: times[1], 3: times[3]}):
+        result = merge_stack(_partly_known(codes, times, known), OFF_PIPELINE)
+        names = ", ".join(f"f{j}.png" for j in known)
+        assert result.exposures.inferred == f"step from the EXIF of {names}: 2 stops"
+        assert result.exposures.exif_files == [f"f{j}.png" for j in known]
+        assert result.exposures.units.startswith("seconds")
+        error = np.log2(result.stack.exposures / times)
+        assert np.abs(error).max() < 1 / 50, error
+        assert result.exposures.warnings() == []
+    one = merge_stack(_partly_known(codes, times, {0: times[0]}), OFF_PIPELINE)
+    assert one.stack.exposures[0] == times[0]
+    assert one.exposures.inferred.endswith("in seconds from the EXIF of f0.png")
+
+
+def test_a_wrong_exif_time_among_three_is_outvoted_and_named(shared_data):
+    """Three brackets with EXIF, one of them 1 stop off: the step and the unit are their
+    medians' (the truth's), and the wrong one is named and merged at the data's value
+    (within 1/50 stop of the truth; measured 0.000)."""
+    shared_data("openexr_scenes"), shared_data("crf_database")
+    codes, times, _ = _ladder("StillLife", "dorf200", (2.0,) * 4)
+    known = {0: times[0], 1: 2 * times[1], 3: times[3]}
+    result = merge_stack(_partly_known(codes, times, known), OFF_PIPELINE)
+    assert result.exposures.inferred.endswith(": 2 stops")
+    assert np.abs(np.log2(result.stack.exposures / times)).max() < 1 / 50
+    (warning,) = result.exposures.warnings()
+    assert warning.startswith("f1.png:") and "(-1.00 stop)" in warning
+
+
+def test_a_real_set_with_one_file_stripped_of_exif(shared_data, tmp_path, capsys):
+    """frobisher (Canon JPEGs, EXIF 1/8, 1, 8 s) with the middle file's EXIF gone: its
+    exposure is inferred, the two others fix the step at their EXIF's 3 stops (with no
+    metadata at all this camera's curve gives 3 2/3: docs/method.md), the middle one
+    within 1/20 stop of its EXIF's 1 s (measured 0.0022), and the summary and header
+    say seconds. Without --exposures-from-data the stripped file is named."""
+    from hdrio.io.header import read_header
+
+    folder = shared_data("frobisher_001")
+    first, middle, last = sorted(folder.glob("IMG_*.jpg"))
+    stripped = _stripped([middle], tmp_path)[0]
+    code, _, err = run(capsys, "merge", first, stripped, last, "-o", tmp_path / "x.exr")
+    assert code == 2 and f"{stripped.name}: no exposure time" in err
+    code, out, err = run(capsys, "merge", first, stripped, last, "--exposures-from-data",
+                         "--align", "off", "-o", tmp_path / "m.exr")
+    assert code == 0, err
+    assert "1/8 s .. 8 s" in out
+    assert (f"exposures: inferred from the pixels for 1 of 3 brackets (EXIF on {first.name}, "
+            f"{last.name}), step from the EXIF of {first.name}, {last.name}: 3 stops") in out
+    header = read_header(tmp_path / "m.exr")
+    assert header["hdrio:exposureUnits"].startswith("seconds, from the EXIF of")
+    exposures = [float(t) for t in header["hdrio:exposures"]]
+    assert exposures[0] == 0.125 and exposures[2] == 8.0
+    assert abs(np.log2(exposures[1])) < 1 / 20, exposures

@@ -143,8 +143,9 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     full, robust = report.dynamic_range_stops, report.robust_range_stops
     params = result.response.parameters
     inferred = result.exposures.line() if result.exposures is not None else ""
+    relative = inferred and result.exposures.exif is None
     span = (f"relative exposures {stack.exposures[0]:.4g} .. {stack.exposures[-1]:.4g}"
-            if inferred else f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])}")
+            if relative else f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])}")
     lines = [
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), {span} "
         f"(exposures from {stack.exposure_sources[0]}"

@@ -142,7 +142,8 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "stop when the ratios agree on one, relative exposures (the middle bracket "
                 "= 1); the sRGB curve (linear for 16-bit) sets the scale, so a camera "
                 "whose curve differs can get the step wrong: give the nominal step with "
-                "--exposures then (docs/method.md)"),
+                "--exposures then (docs/method.md); when only some files have an EXIF "
+                "exposure time, those fix the unit (seconds) and, two or more, the step"),
     Option("--nd", ("STOPS[:PATTERN]",), "nd", nd_filter, example=("1:c.jpg",),
            repeat=True, group=_EXPOSURE,
            help="the brackets whose name matches PATTERN (all without one) were shot "

@@ -143,7 +143,11 @@ class ExposureCheck:
         e.g. ``"step inferred: 2 stops"``; ``metadata`` then holds the anchor's
         exposures and ``estimated`` is relative to :attr:`reference`. Empty otherwise.
     reference
-        The bracket whose inferred exposure is 1 (with ``inferred``).
+        The bracket whose inferred exposure is 1 (with ``inferred`` and no ``exif``).
+    exif
+        With ``inferred``, when some brackets kept an EXIF exposure time (a set where
+        only some files have metadata): those times, NaN for the others; the estimates
+        are then in their units (seconds).
     """
 
     files: tuple[str, ...]
@@ -152,6 +156,7 @@ class ExposureCheck:
     used: bool = False
     inferred: str = ""
     reference: str = ""
+    exif: np.ndarray | None = None
 
     @property
     def stops(self) -> np.ndarray:
@@ -162,10 +167,11 @@ class ExposureCheck:
         """One line per bracket off by more than :data:`WARN_STOPS`, naming its file
         (none when there was no metadata to be off)."""
         lines: list[str] = []
-        if self.inferred:
+        if self.inferred and self.exif is None:
             return lines
-        for name, meta, data, stops in zip(self.files, self.metadata, self.estimated,
-                                           self.stops, strict=True):
+        metadata = self.metadata if self.exif is None else self.exif
+        for name, meta, data in zip(self.files, metadata, self.estimated, strict=True):
+            stops = math.log2(data / meta) if math.isfinite(meta) else 0.0
             if abs(stops) > WARN_STOPS:
                 lines.append(
                     f"{Path(name).name}: exposure {_text(meta)} in the metadata, the data "
@@ -191,6 +197,9 @@ class ExposureCheck:
     @property
     def units(self) -> str:
         """What the exposures are measured in (seconds, unless inferred)."""
+        if self.inferred and self.exif is not None:
+            return (f"seconds, from the EXIF of {', '.join(self.exif_files)} (the others' "
+                    "inferred from the pixels)")
         if self.inferred:
             return (f"relative to {Path(self.reference).name} = 1 (no exposure metadata: "
                     "inferred from the pixels)")
@@ -200,9 +209,20 @@ class ExposureCheck:
         """The summary's one line on inferred exposures (empty when there was metadata)."""
         if not self.inferred:
             return ""
+        if self.exif is not None:
+            return (f"inferred from the pixels for {len(self.files) - len(self.exif_files)} "
+                    f"of {len(self.files)} brackets (EXIF on {', '.join(self.exif_files)}), "
+                    f"{self.inferred}; {_text(self.estimated[0])} .. "
+                    f"{_text(self.estimated[-1])} s")
         stops = np.log2(self.estimated)
         return (f"inferred from the pixels (no metadata), {self.inferred}; relative, "
                 f"{Path(self.reference).name} = 1, {stops[0]:+.2f} .. {stops[-1]:+.2f} stops")
+
+    @property
+    def exif_files(self) -> list[str]:
+        """Names of the brackets whose EXIF gave their exposure (with ``exif``)."""
+        return [Path(name).name for name, t in zip(self.files, self.exif)
+                if math.isfinite(t)] if self.exif is not None else []
 
 
 def _text(t: float) -> str:

@@ -39,8 +39,9 @@ import numpy as np
 
 from hdrio.errors import InputError
 from hdrio.io.brackets import PLACEHOLDERS
+from hdrio.io.exposure import exposure_from_exif, relative_exif_exposures
 from hdrio.io.staging import strided_copy
-from hdrio.merge.exposures import ExposureCheck, exposures_from_data
+from hdrio.merge.exposures import WARN_STOPS, ExposureCheck, exposures_from_data
 from hdrio.merge.exposures import fit_log_exposures as fit
 from hdrio.response.curve import CameraResponse
 from hdrio.response.linear import linear_response
@@ -182,9 +183,13 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
     Returns
     -------
     tuple
-        The stack with the inferred exposures (relative: the middle bracket is 1), the
-        response to merge with, and the check (``inferred`` says how the set was
+        The stack with the inferred exposures (relative: the middle bracket is 1; in
+        seconds when some brackets kept an EXIF exposure time: :func:`exif_exposures`),
+        the response to merge with, and the check (``inferred`` says how the set was
         anchored).
+
+    Brackets that kept their EXIF fix what the pixels cannot: two exposure times or more
+    fix the step (the exponent ambiguity), one or more the unit.
     """
     log_t, unlinked = fit(stack.codes, start)
     if unlinked:
@@ -192,13 +197,30 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
         raise InputError(stack.files[c + 1], "no well-exposed pixels in common with "
                                              f"{Path(stack.files[c]).name}: its exposure "
                                              "cannot be inferred; give --exposures")
+    known = exif_exposures(stack)
     # Self-calibration with the starting curve's scale: the ratios become consistent.
     first = replace(stack, exposures=np.exp(log_t))
     _, response, check = exposures_from_data(first, start, True, solve)
     stops = np.diff(np.log2(check.estimated))
     median = float(np.median(stops))
-    step = round(median / CAMERA_STEP) * CAMERA_STEP
-    if step > 0 and np.all(np.abs(stops - median) <= STEP_AGREEMENT):
+    regular = median > 0 and bool(np.all(np.abs(stops - median) <= STEP_AGREEMENT))
+    if len(known) >= 2:  # two exposure times fix the scale the curve would otherwise set
+        a, b = min(known), max(known)
+        per_bracket = float(np.median([math.log2(known[k] / known[j]) / (k - j)
+                                       for j in known for k in known if k > j]))
+        step = round(per_bracket / CAMERA_STEP) * CAMERA_STEP  # one wrong time of 3+ is outvoted
+        if regular and step > 0:
+            anchor = np.exp2(step * np.arange(stack.count))
+            how = f"step from the EXIF of {_names(stack, known)}: {_stops(step)}"
+        else:  # the data's ratios, stretched to the known times' span
+            span = math.log(known[b] / known[a]) / (log_t[b] - log_t[a])
+            anchor = np.exp(span * (log_t - log_t[a]))
+            how = f"step irregular: anchored to the EXIF of {_names(stack, known)}"
+        _, response, check = exposures_from_data(replace(stack, exposures=anchor),
+                                                 response, True, solve)
+        estimated = check.estimated
+    elif regular:
+        step = round(median / CAMERA_STEP) * CAMERA_STEP
         anchor = np.exp2(step * np.arange(stack.count))
         how = f"step inferred: {_stops(step)}"
         _, response, check = exposures_from_data(replace(stack, exposures=anchor),
@@ -209,12 +231,52 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
         how = (f"step irregular ({stops.min():.2f} .. {stops.max():.2f} stops): anchored to "
                f"the {start.method.removeprefix('start:')} curve")
         estimated = check.estimated
+    exif = None
+    if known:  # in the EXIF's units (seconds): the known times' median scale
+        scale = math.exp(float(np.median([math.log(t / estimated[j])
+                                          for j, t in known.items()])))
+        exif = np.array([known.get(j, np.nan) for j in range(stack.count)])
+        reference = ""
+        if len(known) == 1:
+            how += f"; in seconds from the EXIF of {_names(stack, known)}"
+    else:  # relative: the middle bracket is 1
+        reference = stack.files[stack.count // 2]
+        scale = 1.0 / estimated[stack.count // 2]
+    estimated = estimated * scale
+    for j, t in known.items():  # the EXIF's own value, unless the data contradict it
+        if abs(math.log2(estimated[j] / t)) <= WARN_STOPS:
+            estimated[j] = t
     middle = stack.count // 2
-    estimated = estimated / estimated[middle]
-    anchor = anchor / anchor[middle]
+    anchor = anchor * (estimated[middle] / anchor[middle])
     stack = replace(stack, exposures=estimated)
     return stack, response, ExposureCheck(stack.files, anchor, estimated, True, how,
-                                          stack.files[middle])
+                                          reference, exif)
+
+
+def exif_exposures(stack: ExposureStack) -> dict[int, float]:
+    """``{bracket: exposure}`` for the brackets of a metadata-less read whose EXIF has an
+    exposure time after all (a set where only some files kept their EXIF): seconds, or
+    ``t ISO/100 / N^2`` when aperture or ISO vary among them; ``{}`` when those are
+    incomplete, or when the times do not grow with the brackets' brightness (the EXIF
+    is then not trusted; :func:`in_brightness_order` put the brackets in order)."""
+    readings = {j: exposure_from_exif(entry) for j, entry in enumerate(stack.metadata or ())
+                if entry}
+    readings = {j: reading for j, reading in readings.items() if reading is not None}
+    if not readings:
+        return {}
+    try:
+        values = relative_exif_exposures(list(readings.values()))
+    except ValueError:
+        return {}
+    known = dict(zip(readings, values))
+    order = sorted(known)
+    if any(known[k] >= known[later] for k, later in zip(order, order[1:])):
+        return {}
+    return known
+
+
+def _names(stack: ExposureStack, known: dict[int, float]) -> str:
+    return ", ".join(Path(stack.files[j]).name for j in sorted(known))
 
 
 def _stops(step: float) -> str:
