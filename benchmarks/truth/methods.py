@@ -189,6 +189,9 @@ HDRIO_VARIANTS: dict[str, tuple[MergeOptions, str]] = {
     "hdrio log": (MergeOptions(merge="log"), "default response, the tutorial's log-domain "
                   "triangle-weighted merge (the default before the noise model)"),
     "hdrio Poisson": (MergeOptions(merge="Poisson"), "default response, Poisson estimator"),
+    "hdrio Robertson2003": (MergeOptions(response="Robertson2003"),
+                            "Debevec's response refined by maximum likelihood with the noise "
+                            "model (Robertson et al. 2003), the default merge"),
     "hdrio tutorial": (MergeOptions(weighting="tutorial-hat", sampling="tutorial",
                                     merge="log", saturation="pixel"),
                        "the tutorial's hat weights, sample grid and per-pixel saturation"),

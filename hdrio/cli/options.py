@@ -152,7 +152,9 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "unfiltered brackets, and corrected (repeatable; PATTERN e.g. 'sun_*.jpg')"),
     Option("--response", ("METHOD",), "response", registry(response_methods),
            example=("linear",),
-           help="camera response: Debevec1997 (solved; the default) or linear (RAW and "
+           help="camera response: Debevec1997 (solved; the default), Robertson2003 "
+                "(Debevec's refined by maximum likelihood with the stack's noise model; "
+                "no better on the truth harness, docs/accuracy.md) or linear (RAW and "
                 "linear TIFF need no solve; RAW always uses it)"),
     Option("--response-from", ("EXR",), "response_from", text, example=("out.exr",),
            help="reuse the camera response saved in an EXR hdrio wrote (no solve)"),
