@@ -281,7 +281,7 @@ def test_dry_run_prints_the_plan_and_writes_nothing(brackets, out, capsys):
     (["--merge", "--compression", "lzw", "-o", "x.exr"], ["--compression lzw", "zip"]),
     (["--merge", "-o", "x.jpg"], ["-o x.jpg", "scene-linear", "--tonemap"]),
     (["--merge", "-o", "x.bmp"], ["-o x.bmp", "unsupported output type"]),
-    (["--response", "robertson"], ["--response robertson", "Debevec1997"]),
+    (["--response", "mitsunaga"], ["--response mitsunaga", "Debevec1997"]),
     (["--threads", "0"], ["--threads 0", "positive whole number"]),
 ])
 def test_errors_name_the_operation_and_argument(brackets, out, capsys, monkeypatch, argv,
