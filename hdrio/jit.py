@@ -17,6 +17,13 @@ import subprocess
 import sys
 from collections.abc import Callable
 
+INNER = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+"""numba options of a kernel's helper that only other kernels call (``@njit(...,
+**INNER)``, without ``cache=True``): no Python or C entry point of its own to build (each
+costs about 0.05 s of a first run's compile), and no cache file of its own to write; a
+cached kernel holds the code of every helper it calls. Such a helper cannot be called
+from Python."""
+
 STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
