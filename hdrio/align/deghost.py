@@ -186,7 +186,8 @@ def _consistency(start, stop, codes, estimates, variance, dark_bound, dark_varia
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
                     sample = gathered[i]
                     i += 1
-                    known[:] = -1
+                    for k in range(count):  # not known[:] = -1: less to compile
+                        known[k] = -1
                     for c in range(channels):
                         z = sample[reference, c]
                         start_var[c] = variance[reference, c, z]
