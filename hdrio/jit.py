@@ -105,7 +105,8 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
     when a kernel is not cached), with ``motion`` alignment's still check and
     deghosting's test of such brackets, and the ``preview`` operator's (a
     ``TONEMAP_METHODS`` name, or None); how many processes: :func:`helper_jobs`.
-    Nothing when they are cached already or this process may use one CPU only.
+    Nothing when they are cached already, being compiled, or this process may use one
+    CPU only.
     :func:`announce` of a stage waits for the process compiling it first."""
     from hdrio.parallel import threads
 
@@ -113,10 +114,10 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
     if cpus < 2:
         return
     uncached = [stage for stage in ("motion", "merge")
-                if (motion or stage == "merge") and not is_stage_cached(stage)]
+                if (motion or stage == "merge") and not _started_or_cached(stage)]
     if uncached and not merge():  # their kernels are compiled for 8-bit RGB brackets
         uncached = []
-    if preview and not is_stage_cached("preview"):
+    if preview and not _started_or_cached("preview"):
         uncached.append(f"preview={preview}")
     for niceness, names in helper_jobs(cpus, uncached):
         process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile",
@@ -124,6 +125,13 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                    stderr=subprocess.DEVNULL, text=True)
         _pending.update((name.partition("=")[0], process) for name in names)
+
+
+def _started_or_cached(stage: str) -> bool:
+    """True when a process of :func:`compile_ahead` compiles or compiled ``stage``, or its
+    kernels are cached (a second call, e.g. ``hdrio demo``'s before rendering and the
+    merge's, starts nothing twice)."""
+    return stage in _pending or stage in _finished or is_stage_cached(stage)
 
 
 def _wait_for(stage: str) -> None:

@@ -69,3 +69,26 @@ def test_two_cpus_compile_ahead_in_one_process_and_more_in_one_a_stage():
                                           (8, ["preview=reinhard-local"])]
     assert jit.helper_jobs(8, ["merge", "preview=reinhard-global"]) == [
         (4, ["merge"]), (8, ["preview=reinhard-global"])]
+
+
+def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
+    # `hdrio demo` starts compiling before it renders its brackets, and merge_files asks
+    # again: stages being compiled (or compiled) by a process are not started twice.
+    started = []
+
+    class _Process:
+        def __init__(self, command, **_):
+            started.append(command[command.index("hdrio.precompile") + 2:])
+
+    monkeypatch.setattr(jit.subprocess, "Popen", _Process)
+    monkeypatch.setattr(jit, "_pending", {})
+    monkeypatch.setattr(jit, "_finished", set())
+    monkeypatch.setattr(jit, "is_stage_cached", lambda stage: False)
+    monkeypatch.setenv("HDRIO_THREADS", "2")
+    jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
+    jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
+    assert started == [["merge", "preview=reinhard-global"]]
+    jit._pending.pop("merge")
+    jit._finished.add("merge")  # said by the process, waited for
+    jit.compile_ahead("reinhard-local", merge=lambda: True)
+    assert started == [["merge", "preview=reinhard-global"]]
