@@ -4,10 +4,11 @@ Kernels compile on first use and are cached on disk (``cache=True``); a later pr
 loads them in milliseconds. The first run of a job can spend most of its time compiling,
 so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
-(:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile the kernels the
-job needs later (the merge's, alignment's and deghosting's, the preview's tone mapping)
-while this one reads the brackets and solves the response; it waits for them before
-those stages and then loads those kernels from the cache.
+(:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile kernels the job
+needs later (the merge's, the preview's tone mapping, and with four CPUs or more
+alignment's and deghosting's, which on fewer this process compiles itself when it
+reaches them) while this one reads the brackets and solves the response; it waits for
+them before those stages and then loads those kernels from the cache.
 """
 
 from __future__ import annotations
@@ -16,6 +17,13 @@ import importlib
 import subprocess
 import sys
 from collections.abc import Callable
+
+INNER = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+"""numba options of a kernel's helper that only other kernels call (``@njit(...,
+**INNER)``, without ``cache=True``): no Python or C entry point of its own to build (each
+costs about 0.05 s of a first run's compile), and no cache file of its own to write; a
+cached kernel holds the code of every helper it calls. Such a helper cannot be called
+from Python."""
 
 STAGES: dict[str, tuple[str, ...]] = {
     "response": ("hdrio.response.kernels:reduced_normal_matrix",),
@@ -57,52 +65,88 @@ def announce(say: Callable[[str], None], stage: str) -> None:
 
 
 _LATER_NICENESS = (0, 4, 8)
-"""Niceness of the compile-ahead processes for motion, merge and preview (CFS gives a
-process of niceness 4 about 40 % of a nice-0 one's share)."""
+"""Niceness of the compile-ahead processes for motion, merge and preview when each has
+a process of its own (CFS gives a process of niceness 4 about 40 % of a nice-0 one's
+share)."""
+
+ONE_HELPER_BELOW = 4
+"""With fewer CPUs than this, :func:`compile_ahead` starts one process (merge, then the
+preview) and this process compiles alignment's and deghosting's kernels itself when it
+reaches them: on 2 cores a first run is CPU-bound, and each process more costs its
+imports (0.8 s of CPU) for no core of its own."""
 
 _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
+
+_finished: set[str] = set()
+"""Stages a process of :func:`compile_ahead` said it has compiled."""
+
+
+def helper_jobs(cpus: int, stages: list[str]) -> list[tuple[int, list[str]]]:
+    """The compile-ahead processes for ``stages`` (names of :mod:`hdrio.precompile`:
+    ``motion``, ``merge``, ``preview=OPERATOR``, in the order the job needs them) on
+    ``cpus`` CPUs: ``(niceness, stages)`` each. Below :data:`ONE_HELPER_BELOW` CPUs, one
+    process of merge and preview (motion compiles in the job itself); else one process a
+    stage, each later one at a lower priority (the stage the job waits for next should
+    not share its core with one it needs seconds later)."""
+    if cpus < ONE_HELPER_BELOW:
+        ahead = [stage for stage in stages if stage != "motion"]
+        return [(0, ahead)] if ahead else []
+    by_stage = {stage.partition("=")[0]: stage for stage in stages}
+    return [(niceness, [by_stage[name]])
+            for niceness, name in zip(_LATER_NICENESS, ("motion", "merge", "preview"),
+                                      strict=True) if name in by_stage]
 
 
 def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool = False
                   ) -> None:
     """On a first run, start processes (:mod:`hdrio.precompile`) compiling kernels into
     the disk cache: the merge kernel of 8-bit RGB brackets when ``merge()`` (asked only
-    when a kernel is not cached), and with ``motion`` alignment's still check and
-    deghosting's test of such brackets, in a process of their own (the longest compile
-    of a first run: 14 s of CPU); the ``preview`` operator's (a ``TONEMAP_METHODS`` name,
-    or None). Nothing when they are cached already or this process may use one CPU only.
-    :func:`announce` of a stage waits for its process first."""
+    when a kernel is not cached), with ``motion`` alignment's still check and
+    deghosting's test of such brackets, and the ``preview`` operator's (a
+    ``TONEMAP_METHODS`` name, or None); how many processes: :func:`helper_jobs`.
+    Nothing when they are cached already, being compiled, or this process may use one
+    CPU only.
+    :func:`announce` of a stage waits for the process compiling it first."""
     from hdrio.parallel import threads
 
-    if threads() < 2:
+    cpus = threads()
+    if cpus < 2:
         return
-    uncached = [stage for stage in ("merge", "motion")
-                if (motion or stage == "merge") and not is_stage_cached(stage)]
+    uncached = [stage for stage in ("motion", "merge")
+                if (motion or stage == "merge") and not _started_or_cached(stage)]
     if uncached and not merge():  # their kernels are compiled for 8-bit RGB brackets
         uncached = []
-    # In the order the job needs them, each later one at a lower priority: on 2 cores
-    # the first run is CPU-bound, and the stage the job waits for next should not share
-    # its core with one it needs seconds later.
-    jobs = {("motion",): ["motion"] if "motion" in uncached else [],
-            ("merge",): ["merge"] if "merge" in uncached else [],
-            ("preview",): (
-                [f"preview={preview}"] if preview and not is_stage_cached("preview") else [])}
-    for niceness, (stages, names) in zip(_LATER_NICENESS, jobs.items(), strict=True):
-        if names:
-            process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile",
-                                        f"nice={niceness}", *names],
-                                       stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                       stderr=subprocess.DEVNULL)
-            _pending.update(dict.fromkeys(stages, process))
+    if preview and not _started_or_cached("preview"):
+        uncached.append(f"preview={preview}")
+    for niceness, names in helper_jobs(cpus, uncached):
+        process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile",
+                                    f"nice={niceness}", *names],
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                   stderr=subprocess.DEVNULL, text=True)
+        _pending.update((name.partition("=")[0], process) for name in names)
+
+
+def _started_or_cached(stage: str) -> bool:
+    """True when a process of :func:`compile_ahead` compiles or compiled ``stage``, or its
+    kernels are cached (a second call, e.g. ``hdrio demo``'s before rendering and the
+    merge's, starts nothing twice)."""
+    return stage in _pending or stage in _finished or is_stage_cached(stage)
 
 
 def _wait_for(stage: str) -> None:
-    """Wait until :func:`compile_ahead`'s process for ``stage`` is done (its kernels are
-    then in the cache; if it failed, they simply compile here on first use)."""
+    """Wait until :func:`compile_ahead`'s process for ``stage`` says it has compiled it
+    (its kernels are then in the cache), or ends (if it failed, they simply compile here
+    on first use)."""
     process = _pending.pop(stage, None)
-    if process is not None:
-        process.wait()
+    while process is not None and stage not in _finished:
+        line = process.stdout.readline()
+        if not line:
+            process.wait()
+            break
+        _finished.add(line.strip())
+    if process is not None and process not in _pending.values():
+        process.wait()  # its last stage: it exits now
 
 
 def is_stage_cached(stage: str) -> bool:

@@ -47,8 +47,9 @@ def _compile_preview(operator: str) -> None:
 
 def main(argv: Sequence[str]) -> int:
     """``python -m hdrio.precompile [nice=N] merge motion preview=OPERATOR``: compile
-    those kernels (at niceness ``N`` when given; and stop when the process that started
-    this one stops)."""
+    those kernels in that order (at niceness ``N`` when given; and stop when the process
+    that started this one stops), printing each stage's name (``merge``, ``motion``,
+    ``preview``) once its kernels are in the cache."""
     die_with_parent(os.getppid())
     for stage in argv:
         name, _, value = stage.partition("=")
@@ -60,6 +61,9 @@ def main(argv: Sequence[str]) -> int:
             _compile_motion()
         elif name == "preview":
             _compile_preview(value)
+        else:
+            continue
+        print(name, flush=True)  # hdrio.jit waits for this line
     return 0
 
 

@@ -7,6 +7,9 @@ import os
 import subprocess
 import sys
 
+from hdrio import jit
+from hdrio.parallel import threads
+
 _CACHED = """
 import sys
 from hdrio import jit
@@ -24,7 +27,9 @@ def test_compile_ahead_fills_the_cache_the_job_reads(tmp_path):
     cache = str(tmp_path / "numba-cache")
     stages = ["merge", "motion", "preview"]
     assert _run(["-c", _CACHED, *stages], cache) == "merge=False motion=False preview=False"
-    _run(["-m", "hdrio.precompile", "merge", "motion", "preview=reinhard-global"], cache)
+    said = _run(["-m", "hdrio.precompile", "merge", "motion", "preview=reinhard-global"],
+                cache)
+    assert said.split() == stages  # each stage's name once it is cached (hdrio.jit waits on it)
     # A new process finds every kernel of those stages in the cache: the job's merge,
     # alignment, deghosting and preview load them instead of compiling.
     assert _run(["-c", _CACHED, *stages], cache) == "merge=True motion=True preview=True"
@@ -37,11 +42,53 @@ def test_a_first_merge_says_it_compiles_only_what_is_not_cached(tmp_path, bracke
                str(tmp_path / "out.exr"), "--preview", str(tmp_path / "out.jpg")]
     first = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert first.returncode == 0, first.stderr
-    # The response compiles here; the merge, alignment and deghosting, and preview
-    # kernels were compiled meanwhile by the helper processes, so the job loads them and
-    # says nothing of them (the report's check is NumPy: nothing to compile).
+    # The response compiles here; the kernels of the stages compiled ahead (on this
+    # machine's CPUs) were compiled meanwhile by the helper processes, so the job loads
+    # them and says nothing of them; the others it compiles (and says so). The report's
+    # check is NumPy: nothing to compile.
+    ahead = {name.partition("=")[0] for _, names in
+             jit.helper_jobs(threads(), ["motion", "merge", "preview=reinhard-global"])
+             for name in names}
     assert "compiling kernels (first run only): response" in first.stderr
     for stage in ("merge", "motion", "preview"):
-        assert f"compiling kernels (first run only): {stage}" not in first.stderr
+        said = f"compiling kernels (first run only): {stage}" in first.stderr
+        assert said == (stage not in ahead), (stage, first.stderr)
     second = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert second.returncode == 0 and "compiling kernels" not in second.stderr
+
+
+def test_two_cpus_compile_ahead_in_one_process_and_more_in_one_a_stage():
+    stages = ["motion", "merge", "preview=reinhard-local"]
+    # On 2 or 3 CPUs: one process, merge then preview, at full priority; the job
+    # compiles alignment's and deghosting's kernels itself (a process more would cost
+    # its imports and have no core of its own).
+    assert jit.helper_jobs(2, stages) == [(0, ["merge", "preview=reinhard-local"])]
+    assert jit.helper_jobs(3, ["motion"]) == []
+    # On 4 or more: a process a stage, later stages at a lower priority.
+    assert jit.helper_jobs(4, stages) == [(0, ["motion"]), (4, ["merge"]),
+                                          (8, ["preview=reinhard-local"])]
+    assert jit.helper_jobs(8, ["merge", "preview=reinhard-global"]) == [
+        (4, ["merge"]), (8, ["preview=reinhard-global"])]
+
+
+def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
+    # `hdrio demo` starts compiling before it renders its brackets, and merge_files asks
+    # again: stages being compiled (or compiled) by a process are not started twice.
+    started = []
+
+    class _Process:
+        def __init__(self, command, **_):
+            started.append(command[command.index("hdrio.precompile") + 2:])
+
+    monkeypatch.setattr(jit.subprocess, "Popen", _Process)
+    monkeypatch.setattr(jit, "_pending", {})
+    monkeypatch.setattr(jit, "_finished", set())
+    monkeypatch.setattr(jit, "is_stage_cached", lambda stage: False)
+    monkeypatch.setenv("HDRIO_THREADS", "2")
+    jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
+    jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
+    assert started == [["merge", "preview=reinhard-global"]]
+    jit._pending.pop("merge")
+    jit._finished.add("merge")  # said by the process, waited for
+    jit.compile_ahead("reinhard-local", merge=lambda: True)
+    assert started == [["merge", "preview=reinhard-global"]]

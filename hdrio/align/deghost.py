@@ -31,6 +31,7 @@ import scipy.ndimage
 from numba import njit
 
 from hdrio.io.staging import is_staged, release
+from hdrio.jit import INNER
 from hdrio.parallel import on_threads
 from hdrio.skips import well_exposed_codes
 
@@ -83,7 +84,7 @@ the clipped sky in the 8 s JPEG, half as bright as the 1 s one says). Farther or
 samples keep counting: people walking in front of a bright window are motion."""
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **INNER)
 def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - compiled
     """Smallest and largest usable estimate of bracket ``j`` around ``(y, x)`` (3x3)."""
     height, width = codes.shape[1], codes.shape[2]
@@ -99,7 +100,7 @@ def _local_range(codes, estimates, variance, j, y, x, c):  # pragma: no cover - 
     return low, high
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **INNER)
 def _clipped_near(codes, j, y, x, black, high, radius):  # pragma: no cover - compiled
     """Whether some channel of bracket ``j`` is above ``high`` or at most ``black``
     within ``radius`` pixels of ``(y, x)`` (within :data:`BRIGHT_RADIUS` when ``(y, x)``
@@ -117,7 +118,7 @@ def _clipped_near(codes, j, y, x, black, high, radius):  # pragma: no cover - co
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **INNER)
 def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - compiled
     """:func:`_clipped_near`, remembered in ``known[j]`` (-1: not yet asked) for one sample."""
     if known[j] < 0:
@@ -185,7 +186,8 @@ def _consistency(start, stop, codes, estimates, variance, dark_bound, dark_varia
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
                     sample = gathered[i]
                     i += 1
-                    known[:] = -1
+                    for k in range(count):  # not known[:] = -1: less to compile
+                        known[k] = -1
                     for c in range(channels):
                         z = sample[reference, c]
                         start_var[c] = variance[reference, c, z]

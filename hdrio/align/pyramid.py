@@ -46,9 +46,10 @@ def _base_rows(start, stop, codes, linear, low, high, factor, out, valid,
     code_totals = np.empty(cols, np.int64)
     goods = np.empty(cols, np.bool_)
     for by in range(start, stop):
-        totals[:] = 0.0
-        code_totals[:] = 0
-        goods[:] = True
+        for bx in range(cols):  # not slice assignments: 0.3 s less to compile
+            totals[bx] = 0.0
+            code_totals[bx] = 0
+            goods[bx] = True
         for y in range(by * factor, by * factor + factor):
             row = codes[y]
             for bx in range(cols):

@@ -50,7 +50,9 @@ def _read(codes, linear, ys, xs, low, high, values, gx, gy, good):  # pragma: no
     loads wait for memory together), then worked on."""
     height, width, channels = codes.shape
     n = ys.size
-    gathered = np.zeros((n, 5, channels), codes.dtype)
+    # Only the points inside the border are gathered, and only they are read. (np.empty,
+    # not np.zeros: deghosting compiles it for the same types; 0.3 s less to compile.)
+    gathered = np.empty((n, 5, channels), codes.dtype)
     for i in range(n):
         y, x = ys[i], xs[i]
         if 0 < y < height - 1 and 0 < x < width - 1:

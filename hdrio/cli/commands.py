@@ -251,12 +251,15 @@ def add_demo(sub) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
+    from hdrio import jit
     from hdrio.demo import DEMO_EXPOSURES, oracle_radiance, write_demo_brackets
     from hdrio.synthetic import radiance_error, well_exposed
 
     folder = Path(args.output_dir)
     folder.mkdir(parents=True, exist_ok=True)
     progress = Progress(quiet=args.quiet)
+    # A first run compiles ahead while the brackets (8-bit RGB) are rendered, too.
+    jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
     progress.step(f"rendering {len(DEMO_EXPOSURES)} synthetic brackets into {folder}")
     truth, files = write_demo_brackets(folder)
     output, preview = folder / "demo.exr", folder / "demo_preview.jpg"

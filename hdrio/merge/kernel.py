@@ -90,6 +90,7 @@ import math
 import numpy as np
 from numba import njit
 
+from hdrio.jit import INNER
 from hdrio.parallel import on_threads
 
 MAX_BRACKETS = 64
@@ -120,9 +121,15 @@ _EXP_POLYNOMIAL = tuple(np.float32(c) for c in (
 _KERNEL = dict(cache=True, nogil=True, fastmath={"contract"}, error_model="numpy")
 """Fused multiply-adds allowed (they round once, not twice); division by 0 gives inf or
 NaN instead of raising (the fallback replaces those values)."""
+_INNER = dict(_KERNEL, cache=False, **INNER)
+"""The helpers only other kernels call (:data:`hdrio.jit.INNER`)."""
+_INLINED = dict(_INNER, inline="always")
+"""Helpers numba inlines into their caller's IR: typed and lowered as part of it, with no
+library of their own to optimise, link and turn into machine code (about 0.2 s each of a
+first run). Not ``_exp_row``: inlined, the log domain's merge was 3 % slower."""
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _saturated_everywhere(row, code_max):  # pragma: no cover - compiled
     for i in range(row.size):
         if row[i] != code_max:
@@ -130,13 +137,13 @@ def _saturated_everywhere(row, code_max):  # pragma: no cover - compiled
     return True
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _reset_add(total, keep, term):  # pragma: no cover - compiled
     """``total * keep + term`` on both parts (``keep`` 0 or 1), as fused multiply-adds."""
     return complex(total.real * keep + term.real, total.imag * keep + term.imag)
 
 
-@njit(**_KERNEL)
+@njit(**_INNER)
 def _accumulate(row, terms, limits, channels, sums):  # pragma: no cover - compiled
     """``sum = sum * (z < limit) + term[z]`` over one bracket's row (the terms are 0 from
     the channel's limit up, so this is ``(sum + term) * (z < limit)``: one fused
@@ -157,7 +164,7 @@ def _accumulate(row, terms, limits, channels, sums):  # pragma: no cover - compi
                              terms[i % channels, z])
 
 
-@njit(**_KERNEL)
+@njit(**_INNER)
 def _accumulate_two(longer, shorter, terms_longer, terms_shorter, limits,
                     sums):  # pragma: no cover - compiled
     """Two brackets at once, per-channel policy, three channels: half the loads and
@@ -202,7 +209,7 @@ def pair_tables(terms: np.ndarray, limits: np.ndarray) -> np.ndarray:
     return tables.reshape(count, channels, PAIR_LEVELS * PAIR_LEVELS)
 
 
-@njit(**_KERNEL)
+@njit(**_INNER)
 def _pair_term(total, i, longer, shorter, table, limit, fresh):  # pragma: no cover
     """``total`` after the pair's codes at ``i``: ``T[z, y]`` added to it (reset where
     ``z`` or ``y`` is at or above the channel's ``limit``), or ``T[z, y]`` alone for the
@@ -215,7 +222,7 @@ def _pair_term(total, i, longer, shorter, table, limit, fresh):  # pragma: no co
     return _reset_add(total, np.float32((z < limit) & (y < limit)), term)
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _add_pair(longer, shorter, table, limits, sums, fresh):  # pragma: no cover
     """One pair of brackets over a row (three channels)."""
     t0, t1, t2 = table[0], table[1], table[2]
@@ -227,7 +234,7 @@ def _add_pair(longer, shorter, table, limits, sums, fresh):  # pragma: no cover
         sums[i + 2] = _pair_term(sums[i + 2], i + 2, longer, shorter, t2, l2, fresh)
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _add_two_pairs(longer, shorter, longer2, shorter2, table, table2, limits, sums,
                    fresh):  # pragma: no cover - compiled
     """Two pairs of brackets over a row, the longer pair first: half the loads and
@@ -248,7 +255,7 @@ def _add_two_pairs(longer, shorter, longer2, shorter2, table, table2, limits, su
             i + 2, longer2, shorter2, b2, l2, False)
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _accumulate_by_pairs(codes, y, stop, pairs, zeros, limits,
                          sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, in pairs (four brackets per pass while
@@ -267,7 +274,7 @@ def _accumulate_by_pairs(codes, y, stop, pairs, zeros, limits,
                   sums, fresh)
 
 
-@njit(**_KERNEL)
+@njit(**_INNER)
 def _accumulate_by_brackets(codes, y, stop, terms, limits,
                             sums):  # pragma: no cover - compiled
     """Brackets ``stop - 1 .. 0`` of row ``y``, one look-up per code, longest first."""
@@ -306,7 +313,7 @@ def _exp_row(values, scale):  # pragma: no cover - compiled
         values[i] *= powers[i]
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
     """``row = numerator / denominator`` (the sums' two parts), clamped to float32's
     range (the range of ``ln E``, then exponentiated, in the log domain). True if a
@@ -326,7 +333,7 @@ def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
     return empty
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _unsafe(row, x, c, channels, limits, pixel_rule):  # pragma: no cover - compiled
     """Whether channel ``c`` of pixel ``x`` in ``row`` is dropped: its code at or above
     its limit, or (``pixel_rule``) any channel's."""
@@ -338,7 +345,7 @@ def _unsafe(row, x, c, channels, limits, pixel_rule):  # pragma: no cover - comp
     return False
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _fallback(codes, y, x, c, channels, limits, pixel_rule,
               estimates):  # pragma: no cover - compiled
     """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
@@ -364,7 +371,7 @@ def _fallback(codes, y, x, c, channels, limits, pixel_rule,
     return value
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - compiled
     """``out``: ``row``'s codes with every dropped observation set to ``Z_max`` (a code
     at or above its channel's limit; with ``pixel_rule`` all of the pixel's channels
@@ -393,7 +400,7 @@ def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - co
                 else z
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _clipped_and_black(shortest, longest, limits, channels):  # pragma: no cover - compiled
     """Pixels with a channel at or above its limit in ``shortest``; pixels at 0 in all of
     ``longest``."""
@@ -419,7 +426,7 @@ def _clipped_and_black(shortest, longest, limits, channels):  # pragma: no cover
     return clipped, black
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _early_stop(codes, y, code_max, early_stop):  # pragma: no cover - compiled
     """The first bracket saturated across the whole row ``y`` (the bracket count when
     none is, or when ``early_stop`` is false): it and every longer one would be reset
@@ -431,7 +438,7 @@ def _early_stop(codes, y, code_max, early_stop):  # pragma: no cover - compiled
     return count
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule
                  ):  # pragma: no cover - compiled
     """The rows to sum for row ``y``: ``codes`` itself and ``y``, or (when ``remapped``
@@ -444,7 +451,7 @@ def _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule
     return remapped, 0
 
 
-@njit(**_KERNEL)
+@njit(**_INLINED)
 def _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
                 out, clipped_rows, black_rows, skipped_rows):  # pragma: no cover - compiled
     """Row ``y``'s result from its sums (the fallback where no weight is left) and its

@@ -28,7 +28,9 @@ def reduced_normal_matrix(Z, squares, l_inverse, diagonal, first, second,
     """
     n = out.shape[0]
     n_samples, n_brackets = Z.shape
-    out[:] = 0.0
+    for z in range(n):  # not out[:] = 0.0: numba's slice assignment is more to compile
+        for k in range(n):
+            out[z, k] = 0.0
     for i in range(n_samples):
         for j in range(n_brackets):
             scaled = squares[i, j] * l_inverse[i]
