@@ -18,7 +18,6 @@ import sys
 from collections.abc import Callable
 
 STAGES: dict[str, tuple[str, ...]] = {
-    "response": ("hdrio.response.kernels:reduced_normal_matrix",),
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.pyramid:_base_rows",
                "hdrio.align.deghost:_consistency"),
