@@ -26,7 +26,6 @@ cached kernel holds the code of every helper it calls. Such a helper cannot be c
 from Python."""
 
 STAGES: dict[str, tuple[str, ...]] = {
-    "response": ("hdrio.response.kernels:reduced_normal_matrix",),
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.pyramid:_base_rows",
                "hdrio.align.deghost:_consistency"),

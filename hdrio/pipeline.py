@@ -124,8 +124,6 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         check_response_fits(response, stack.code_max, stack.shape[2])
     else:
         method = "linear" if is_raw_stack(stack) else options.response
-        if method != "linear":
-            jit.announce(say, "response")
         say(f"camera response: {method}" + ("" if method == "linear"
                                             else f", lambda {options.smoothing:g}"))
 
