@@ -143,10 +143,11 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
 def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
                  motion: Motion, weights: np.ndarray, domain: str, per_channel: bool,
-                 noise: NoiseModel | None = None) -> None:
+                 limits: tuple[int, ...], noise: NoiseModel | None = None) -> None:
     """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
     bracket (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights
-    (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain``.
+    (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain`` and its
+    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`).
 
     When the brackets were warped, every warped bracket's weight is also lowered where
     its resampling error outweighs its noise (:mod:`hdrio.align.resampling`; ``noise``:
@@ -158,7 +159,7 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
 
     def remerge(codes, keep, out, cell=CELL):
         remerge_masked(codes, keep, cell, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out)
+                       domain == "log", out, limits)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, radiance)
@@ -166,7 +167,7 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
     if noise is None:
         noise = fit_noise(stack.codes, stack.exposures, response)
     reference = motion.alignment.reference
-    remerge_resampled(stack.codes, stack.code_max, motion.keep, CELL,
+    remerge_resampled(stack.codes, limits, motion.keep, CELL,
                       [j != reference for j in range(stack.count)],
                       linear_tables(response, stack.exposures),
                       observation_variance(response, stack.exposures, noise),
