@@ -84,23 +84,26 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     aligned = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
     unaligned = radiance_error(merge_stack(moving, MergeOptions(align="off", deghost="off"))
                                .radiance, truth, inner)
-    # The median bound: 1.5x the still stack's (measured 1.36x with the default
-    # inverse-variance merge, 1.23x with the log merge). Its p99 bound of 2x is NOT met:
-    # with the log merge 2.26x, the same with the exact transforms and with spline
-    # interpolation of order 3 or 5 (a resampled aliased image differs from the still one
-    # at sharp edges whatever the interpolator); with the inverse-variance merge 5.3x
-    # (0.217 against 0.041: the still stack's p99 fell from 0.054, the warped one's rose
-    # from 0.121, with deghosting on or off): the noise-optimal weights lean on the
-    # longest unsaturated bracket, where a warp's edge errors are not averaged away.
-    # Bounds here so that a regression shows: 2.5x (log) and 6x (default).
+    # The bounds: median 1.5x and p99 2x the still stack's. A warped bracket is
+    # off at sharp edges by a fraction of the edge's step (the scene is sampled without a
+    # band-limiting filter: warped and warped back in floating point by a cubic spline,
+    # a bracket's ideal radiance is 41-57 % off at its p99), which the noise model does
+    # not know; the merge lowers each warped bracket's weight there by var_noise /
+    # (var_noise + var_resample), var_resample measured against the unwarped reference
+    # (hdrio.align.resampling). Measured, seeds 0 / 1 / 2: default (inverse-variance)
+    # median 1.33x / 1.11x / 1.04x, p99 2.22x / 2.05x / 1.91x (5.2x / 4.9x / 4.8x
+    # without); log merge p99 1.70x / 1.73x / 1.53x. The default's p99 bound of 2x is met
+    # on seed 2 only: weights from the true per-pixel error would give 1.83x / 1.72x, so
+    # what is left is the estimate's (the reference here is the shortest, noisiest
+    # bracket). Bounds here with about 10 % margin: 2.45x (default), 1.9x (log).
     # Without alignment the same stack is 6x and 10x off.
     assert aligned["median"] <= 1.5 * base["median"], (aligned, base)
-    assert aligned["p99"] <= 6 * base["p99"], (aligned, base)
+    assert aligned["p99"] <= 2.45 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
     log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
-    assert log_aligned["p99"] <= 2.5 * log_base["p99"], (log_aligned, log_base)
+    assert log_aligned["p99"] <= 1.9 * log_base["p99"], (log_aligned, log_base)
     assert unaligned["median"] > 3 * base["median"]
 
 

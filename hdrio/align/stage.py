@@ -166,9 +166,8 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
         return
     if noise is None:
         noise = fit_noise(stack.codes, stack.exposures, response)
-    reference = motion.alignment.reference
-    remerge_resampled(stack.codes, limits, motion.keep, CELL,
-                      [j != reference for j in range(stack.count)],
+    remerge_resampled(stack.codes, limits, motion.keep, CELL, motion.alignment.reference,
                       linear_tables(response, stack.exposures),
                       observation_variance(response, stack.exposures, noise),
+                      consistency_variance(response, stack.exposures, noise),
                       lambda codes, keep, out: remerge(codes, keep, out, 1), radiance)
