@@ -91,19 +91,20 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     # not know; the merge lowers each warped bracket's weight there by var_noise /
     # (var_noise + var_resample), var_resample measured against the unwarped reference
     # (hdrio.align.resampling). Measured, seeds 0 / 1 / 2: default (inverse-variance)
-    # median 1.33x / 1.11x / 1.04x, p99 2.22x / 2.05x / 1.91x (5.2x / 4.9x / 4.8x
-    # without); log merge p99 1.70x / 1.73x / 1.53x. The default's p99 bound of 2x is met
+    # median 1.35x / 1.12x / 1.05x, p99 2.30x / 2.06x / 1.97x (5.2x / 4.9x / 4.8x
+    # without); log merge p99 1.66x / 1.56x / 1.42x. The default's p99 bound of 2x is met
     # on seed 2 only: weights from the true per-pixel error would give 1.83x / 1.72x, so
-    # what is left is the estimate's (the reference here is the shortest, noisiest
-    # bracket). Bounds here with about 10 % margin: 2.45x (default), 1.9x (log).
+    # what is left is the estimate's (measured against the reference, here the shortest
+    # and noisiest bracket). Bounds here with about 10 % margin: 2.5x (default), 1.85x
+    # (log).
     # Without alignment the same stack is 6x and 10x off.
     assert aligned["median"] <= 1.5 * base["median"], (aligned, base)
-    assert aligned["p99"] <= 2.45 * base["p99"], (aligned, base)
+    assert aligned["p99"] <= 2.5 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
     log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
-    assert log_aligned["p99"] <= 1.9 * log_base["p99"], (log_aligned, log_base)
+    assert log_aligned["p99"] <= 1.85 * log_base["p99"], (log_aligned, log_base)
     assert unaligned["median"] > 3 * base["median"]
 
 

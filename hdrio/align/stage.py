@@ -9,7 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hdrio.align import ALIGN_MODES, DEGHOST_MODES
-from hdrio.align.deghost import CELL, Deghosting, consistency_variance, deghost
+from hdrio.align.deghost import (
+    CELL,
+    Deghosting,
+    comparametric_correction,
+    consistency_variance,
+    deghost,
+)
 from hdrio.align.pyramid import base_factor
 from hdrio.align.quick import looks_still, usable_masks
 from hdrio.align.registration import (
@@ -166,8 +172,10 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
         return
     if noise is None:
         noise = fit_noise(stack.codes, stack.exposures, response)
-    remerge_resampled(stack.codes, limits, motion.keep, CELL, motion.alignment.reference,
-                      linear_tables(response, stack.exposures),
-                      observation_variance(response, stack.exposures, noise),
-                      consistency_variance(response, stack.exposures, noise),
+    reference = motion.alignment.reference
+    allowed = consistency_variance(response, stack.exposures, noise)
+    remerge_resampled(stack.codes, limits, motion.keep, CELL, reference,
+                      comparametric_correction(stack.codes, linear_tables(
+                          response, stack.exposures), allowed, reference),
+                      observation_variance(response, stack.exposures, noise), allowed,
                       lambda codes, keep, out: remerge(codes, keep, out, 1), radiance)
