@@ -35,8 +35,10 @@ of rows so that memory stays bounded.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-import scipy.ndimage
+from numba import njit, prange
 
 from hdrio.io.staging import release
 
@@ -112,34 +114,94 @@ def resampling_confidence(codes: np.ndarray, reference: np.ndarray, estimates: n
         How far the variances under-state the brackets' disagreement on the whole
         (:func:`disagreement_scale`): both are multiplied by it.
     """
-    channels = codes.shape[2]
     factor = np.ones(codes.shape[:2], np.float32)
-    for c in range(channels):
-        z, zr = codes[..., c], reference[..., c]
-        x, xr = estimates[0, c][z], estimates[1, c][zr]
-        padded = np.pad(x, 1, mode="edge")
-        h = x - 0.25 * (padded[:-2, 1:-1] + padded[2:, 1:-1] + padded[1:-1, :-2]
-                        + padded[1:-1, 2:])
-        both = (np.isfinite(allowed[0, c][z]) & np.isfinite(allowed[1, c][zr])
-                & (z < limits[c]) & (zr < limits[c]))
-        allowance = np.where(both, scale * (allowed[0, c][z] + allowed[1, c][zr]), 0.0)
-        excess = np.where(both, (x - xr) ** 2, 0.0) - allowance
-        covered = scipy.ndimage.uniform_filter(both.astype(np.float32), WINDOW,
-                                               mode="nearest")
-        samples = np.maximum(covered, 1e-6)
-        # The window's mean of a chi-square of one degree has a standard deviation of
-        # sqrt(2 / n) of its allowance: only what is above SIGNIFICANCE of them counts.
-        excess = (scipy.ndimage.uniform_filter(excess, WINDOW, mode="nearest")
-                  - SIGNIFICANCE * np.sqrt(2.0 / (samples * WINDOW * WINDOW))
-                  * scipy.ndimage.uniform_filter(allowance, WINDOW, mode="nearest")) / samples
-        resample = np.where(covered > COVERED, np.maximum(excess, 0.0), h * h)
-        variance = scale * noise[0, c][z]
-        with np.errstate(invalid="ignore"):
-            f = variance / (variance + resample)
-        f[~np.isfinite(f) | (z >= limits[c])] = 1.0
-        np.minimum(factor, f, out=factor)
+    _confidence(np.ascontiguousarray(codes), np.ascontiguousarray(reference),
+                np.ascontiguousarray(estimates, np.float64),
+                np.ascontiguousarray(noise, np.float64),
+                np.ascontiguousarray(allowed, np.float64),
+                np.ascontiguousarray(limits, np.int64), float(scale), factor)
     factor[factor > FULL] = 1.0
     return factor
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def _confidence(codes, reference, estimates, noise, allowed, limits, scale,
+                factor):  # pragma: no cover - compiled
+    """:func:`resampling_confidence` into ``factor`` (``(H, W)``, ones): per channel, the
+    excess disagreement, its allowance, whether both are usable and the Laplacian's
+    square, then their :data:`WINDOW` x :data:`WINDOW` sums (rows, then columns; edges
+    repeated, as ``scipy.ndimage.uniform_filter``'s ``nearest``)."""
+    rows, width, channels = codes.shape
+    half = WINDOW // 2
+    area = float(WINDOW * WINDOW)
+    excess = np.empty((rows, width))
+    allowance = np.empty((rows, width))
+    both = np.empty((rows, width))
+    laplacian = np.empty((rows, width))
+    sums = np.empty((3, rows, width))
+    for c in range(channels):
+        limit = limits[c]
+        for y in prange(rows):
+            up, down = max(y - 1, 0), min(y + 1, rows - 1)
+            for x in range(width):
+                z = codes[y, x, c]
+                zr = reference[y, x, c]
+                value = estimates[0, c, z]
+                h = value - 0.25 * (estimates[0, c, codes[up, x, c]]
+                                    + estimates[0, c, codes[down, x, c]]
+                                    + estimates[0, c, codes[y, max(x - 1, 0), c]]
+                                    + estimates[0, c, codes[y, min(x + 1, width - 1), c]])
+                laplacian[y, x] = h * h
+                a = allowed[0, c, z] + allowed[1, c, zr]
+                if np.isfinite(a) and z < limit and zr < limit:
+                    a *= scale
+                    d = value - estimates[1, c, zr]
+                    excess[y, x] = d * d - a
+                    allowance[y, x] = a
+                    both[y, x] = 1.0
+                else:
+                    excess[y, x] = 0.0
+                    allowance[y, x] = 0.0
+                    both[y, x] = 0.0
+        for y in prange(rows):
+            for x in range(width):
+                e = 0.0
+                a = 0.0
+                b = 0.0
+                for k in range(x - half, x + half + 1):
+                    i = min(max(k, 0), width - 1)
+                    e += excess[y, i]
+                    a += allowance[y, i]
+                    b += both[y, i]
+                sums[0, y, x] = e
+                sums[1, y, x] = a
+                sums[2, y, x] = b
+        for y in prange(rows):
+            for x in range(width):
+                e = 0.0
+                a = 0.0
+                b = 0.0
+                for k in range(y - half, y + half + 1):
+                    i = min(max(k, 0), rows - 1)
+                    e += sums[0, i, x]
+                    a += sums[1, i, x]
+                    b += sums[2, i, x]
+                covered = b / area
+                if covered > COVERED:
+                    # The window's mean of a chi-square of one degree has a standard
+                    # deviation of sqrt(2 / n) of its allowance: only what is above
+                    # SIGNIFICANCE of them counts.
+                    resample = max(0.0, (e / area - SIGNIFICANCE * math.sqrt(2.0 / b)
+                                         * a / area) / covered)
+                else:
+                    resample = laplacian[y, x]
+                z = codes[y, x, c]
+                if z >= limit:
+                    continue
+                variance = scale * noise[0, c, z]
+                f = variance / (variance + resample)
+                if np.isfinite(f) and f < factor[y, x]:
+                    factor[y, x] = f
 
 
 def disagreement_scale(codes: np.ndarray, reference: np.ndarray, estimates: np.ndarray,
