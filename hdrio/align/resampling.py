@@ -79,8 +79,12 @@ def cell_weights(cells: np.ndarray, cell: int, top: int, bottom: int, width: int
 
     y0, y1, wy = corners(np.arange(top, bottom), cells.shape[1])
     x0, x1, wx = corners(np.arange(width), cells.shape[2])
-    rows = (1.0 - wy)[:, None] * cells[:, y0] + wy[:, None] * cells[:, y1]
-    return ((1.0 - wx) * rows[:, :, x0] + wx * rows[:, :, x1]).astype(np.float32)
+    out = np.ones((cells.shape[0], bottom - top, width), np.float32)
+    for j in range(cells.shape[0]):
+        if cells[j, y0].min() < 1.0 or cells[j, y1].min() < 1.0:  # else 1 throughout
+            rows = (1.0 - wy)[:, None] * cells[j, y0] + wy[:, None] * cells[j, y1]
+            out[j] = (1.0 - wx) * rows[:, x0] + wx * rows[:, x1]
+    return out
 
 
 def resampling_confidence(codes: np.ndarray, reference: np.ndarray, estimates: np.ndarray,
@@ -134,15 +138,15 @@ def _confidence(codes, reference, estimates, noise, allowed, limits, scale,
     rows, width, channels = codes.shape
     half = WINDOW // 2
     area = float(WINDOW * WINDOW)
-    excess = np.empty((rows, width))
-    allowance = np.empty((rows, width))
-    both = np.empty((rows, width))
-    laplacian = np.empty((rows, width))
+    laplacian = np.empty((rows, width), np.float32)
     sums = np.empty((3, rows, width))
+    buffer = np.empty((rows, 3, width + 2 * half))
     for c in range(channels):
         limit = limits[c]
         for y in prange(rows):
             up, down = max(y - 1, 0), min(y + 1, rows - 1)
+            row = buffer[y]  # excess, allowance, both, with the edges repeated
+            row[:] = 0.0
             for x in range(width):
                 z = codes[y, x, c]
                 zr = reference[y, x, c]
@@ -156,26 +160,20 @@ def _confidence(codes, reference, estimates, noise, allowed, limits, scale,
                 if np.isfinite(a) and z < limit and zr < limit:
                     a *= scale
                     d = value - estimates[1, c, zr]
-                    excess[y, x] = d * d - a
-                    allowance[y, x] = a
-                    both[y, x] = 1.0
-                else:
-                    excess[y, x] = 0.0
-                    allowance[y, x] = 0.0
-                    both[y, x] = 0.0
-        for y in prange(rows):
-            for x in range(width):
-                e = 0.0
-                a = 0.0
-                b = 0.0
-                for k in range(x - half, x + half + 1):
-                    i = min(max(k, 0), width - 1)
-                    e += excess[y, i]
-                    a += allowance[y, i]
-                    b += both[y, i]
-                sums[0, y, x] = e
-                sums[1, y, x] = a
-                sums[2, y, x] = b
+                    row[0, x + half] = d * d - a
+                    row[1, x + half] = a
+                    row[2, x + half] = 1.0
+            for k in range(3):
+                for x in range(half):
+                    row[k, x] = row[k, half]
+                    row[k, width + half + x] = row[k, width + half - 1]
+                total = 0.0
+                for x in range(WINDOW - 1):
+                    total += row[k, x]
+                for x in range(width):  # a running sum along the row
+                    total += row[k, x + WINDOW - 1]
+                    sums[k, y, x] = total
+                    total -= row[k, x]
         for y in prange(rows):
             for x in range(width):
                 e = 0.0

@@ -123,7 +123,8 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     low = keep.min(axis=0) < 1.0
     if not low.any():
         return 0
-    touched = scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
+    # Cells' weights reach the neighbouring cells (bilinear); a pixel's (cell 1) do not.
+    touched = low if cell == 1 else scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
     channels = codes.shape[-1]
     limits = np.full(channels, code_max, np.int64) if limits is None else \
         np.clip(np.asarray(limits, np.int64), 1, code_max)
