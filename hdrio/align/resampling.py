@@ -38,9 +38,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from hdrio.io.staging import release
+from hdrio.parallel import on_threads
 
 WINDOW = 5
 """Pixels: the side of the window the disagreement with the reference is averaged over
@@ -118,88 +119,103 @@ def resampling_confidence(codes: np.ndarray, reference: np.ndarray, estimates: n
         How far the variances under-state the brackets' disagreement on the whole
         (:func:`disagreement_scale`): both are multiplied by it.
     """
-    factor = np.ones(codes.shape[:2], np.float32)
-    _confidence(np.ascontiguousarray(codes), np.ascontiguousarray(reference),
-                np.ascontiguousarray(estimates, np.float64),
-                np.ascontiguousarray(noise, np.float64),
-                np.ascontiguousarray(allowed, np.float64),
-                np.ascontiguousarray(limits, np.int64), float(scale), factor)
+    rows, width, channels = codes.shape
+    codes, reference = np.ascontiguousarray(codes), np.ascontiguousarray(reference)
+    estimates, noise, allowed = (np.ascontiguousarray(table, np.float64)
+                                 for table in (estimates, noise, allowed))
+    limits = np.ascontiguousarray(limits, np.int64)
+    factor = np.ones((rows, width), np.float32)
+    laplacian = np.empty((rows, width))
+    sums = np.empty((3, rows, width))
+    buffer = np.empty((rows, 3, width + WINDOW - 1))
+    for c in range(channels):  # rows of sums first, then columns of them (all rows done)
+        on_threads(_along_rows, rows, codes, reference, estimates, allowed, limits,
+                   float(scale), c, laplacian, buffer, sums)
+        on_threads(_along_columns, rows, codes, noise, limits, float(scale), c, laplacian,
+                   sums, factor)
     factor[factor > FULL] = 1.0
     return factor
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def _confidence(codes, reference, estimates, noise, allowed, limits, scale,
-                factor):  # pragma: no cover - compiled
-    """:func:`resampling_confidence` into ``factor`` (``(H, W)``, ones): per channel, the
-    excess disagreement, its allowance, whether both are usable and the Laplacian's
-    square, then their :data:`WINDOW` x :data:`WINDOW` sums (rows, then columns; edges
-    repeated, as ``scipy.ndimage.uniform_filter``'s ``nearest``)."""
-    rows, width, channels = codes.shape
+@njit(cache=True, nogil=True)
+def _along_rows(start, stop, codes, reference, estimates, allowed, limits, scale, c,
+                laplacian, buffer, sums):  # pragma: no cover - compiled
+    """Rows ``start .. stop - 1`` of channel ``c``: the Laplacian's square, and the
+    :data:`WINDOW`-wide sums along the row of the excess disagreement, its allowance and
+    whether both brackets are usable (edges repeated, as ``scipy.ndimage``'s
+    ``nearest``)."""
+    rows, width, _ = codes.shape
+    half = WINDOW // 2
+    limit = limits[c]
+    for y in range(start, stop):
+        up, down = max(y - 1, 0), min(y + 1, rows - 1)
+        row = buffer[y]  # excess, allowance, both, with the edges repeated
+        row[:] = 0.0
+        for x in range(width):
+            z = codes[y, x, c]
+            zr = reference[y, x, c]
+            value = estimates[0, c, z]
+            h = value - 0.25 * (estimates[0, c, codes[up, x, c]]
+                                + estimates[0, c, codes[down, x, c]]
+                                + estimates[0, c, codes[y, max(x - 1, 0), c]]
+                                + estimates[0, c, codes[y, min(x + 1, width - 1), c]])
+            laplacian[y, x] = h * h
+            a = allowed[0, c, z] + allowed[1, c, zr]
+            if np.isfinite(a) and z < limit and zr < limit:
+                a *= scale
+                d = value - estimates[1, c, zr]
+                row[0, x + half] = d * d - a
+                row[1, x + half] = a
+                row[2, x + half] = 1.0
+        for k in range(3):
+            for x in range(half):
+                row[k, x] = row[k, half]
+                row[k, width + half + x] = row[k, width + half - 1]
+            total = 0.0
+            for x in range(WINDOW - 1):
+                total += row[k, x]
+            for x in range(width):  # a running sum along the row
+                total += row[k, x + WINDOW - 1]
+                sums[k, y, x] = total
+                total -= row[k, x]
+
+
+@njit(cache=True, nogil=True)
+def _along_columns(start, stop, codes, noise, limits, scale, c, laplacian, sums,
+                   factor):  # pragma: no cover - compiled
+    """Rows ``start .. stop - 1`` of channel ``c``: the window's sums down the columns of
+    :func:`_along_rows`' sums, the resampling variance and the factor (the smallest so
+    far over the channels kept in ``factor``)."""
+    rows, width, _ = codes.shape
     half = WINDOW // 2
     area = float(WINDOW * WINDOW)
-    laplacian = np.empty((rows, width), np.float32)
-    sums = np.empty((3, rows, width))
-    buffer = np.empty((rows, 3, width + 2 * half))
-    for c in range(channels):
-        limit = limits[c]
-        for y in prange(rows):
-            up, down = max(y - 1, 0), min(y + 1, rows - 1)
-            row = buffer[y]  # excess, allowance, both, with the edges repeated
-            row[:] = 0.0
-            for x in range(width):
-                z = codes[y, x, c]
-                zr = reference[y, x, c]
-                value = estimates[0, c, z]
-                h = value - 0.25 * (estimates[0, c, codes[up, x, c]]
-                                    + estimates[0, c, codes[down, x, c]]
-                                    + estimates[0, c, codes[y, max(x - 1, 0), c]]
-                                    + estimates[0, c, codes[y, min(x + 1, width - 1), c]])
-                laplacian[y, x] = h * h
-                a = allowed[0, c, z] + allowed[1, c, zr]
-                if np.isfinite(a) and z < limit and zr < limit:
-                    a *= scale
-                    d = value - estimates[1, c, zr]
-                    row[0, x + half] = d * d - a
-                    row[1, x + half] = a
-                    row[2, x + half] = 1.0
-            for k in range(3):
-                for x in range(half):
-                    row[k, x] = row[k, half]
-                    row[k, width + half + x] = row[k, width + half - 1]
-                total = 0.0
-                for x in range(WINDOW - 1):
-                    total += row[k, x]
-                for x in range(width):  # a running sum along the row
-                    total += row[k, x + WINDOW - 1]
-                    sums[k, y, x] = total
-                    total -= row[k, x]
-        for y in prange(rows):
-            for x in range(width):
-                e = 0.0
-                a = 0.0
-                b = 0.0
-                for k in range(y - half, y + half + 1):
-                    i = min(max(k, 0), rows - 1)
-                    e += sums[0, i, x]
-                    a += sums[1, i, x]
-                    b += sums[2, i, x]
-                covered = b / area
-                if covered > COVERED:
-                    # The window's mean of a chi-square of one degree has a standard
-                    # deviation of sqrt(2 / n) of its allowance: only what is above
-                    # SIGNIFICANCE of them counts.
-                    resample = max(0.0, (e / area - SIGNIFICANCE * math.sqrt(2.0 / b)
-                                         * a / area) / covered)
-                else:
-                    resample = laplacian[y, x]
-                z = codes[y, x, c]
-                if z >= limit:
-                    continue
-                variance = scale * noise[0, c, z]
-                f = variance / (variance + resample)
-                if np.isfinite(f) and f < factor[y, x]:
-                    factor[y, x] = f
+    limit = limits[c]
+    for y in range(start, stop):
+        for x in range(width):
+            z = codes[y, x, c]
+            if z >= limit:
+                continue
+            e = 0.0
+            a = 0.0
+            b = 0.0
+            for k in range(y - half, y + half + 1):
+                i = min(max(k, 0), rows - 1)
+                e += sums[0, i, x]
+                a += sums[1, i, x]
+                b += sums[2, i, x]
+            covered = b / area
+            if covered > COVERED:
+                # The window's mean of a chi-square of one degree has a standard
+                # deviation of sqrt(2 / n) of its allowance: only what is above
+                # SIGNIFICANCE of them counts.
+                resample = max(0.0, (e / area - SIGNIFICANCE * math.sqrt(2.0 / b)
+                                     * a / area) / covered)
+            else:
+                resample = laplacian[y, x]
+            variance = scale * noise[0, c, z]
+            f = variance / (variance + resample)
+            if np.isfinite(f) and f < factor[y, x]:
+                factor[y, x] = f
 
 
 def disagreement_scale(codes: np.ndarray, reference: np.ndarray, estimates: np.ndarray,
