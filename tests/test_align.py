@@ -41,15 +41,12 @@ def truth_scene(request):
 
 
 def _moving(truth_scene, seed: int):
-    from tests.align_truth import euclidean, render, view
+    from tests.align_truth import moving_views, render
 
     crop, truth, exposures, still = truth_scene
-    rng = np.random.default_rng(seed)
-    warps = [euclidean(*rng.uniform(-8, 8, 2), rng.uniform(-0.5, 0.5), H, W)
-             for _ in range(3)]
     reference = reference_bracket(still.codes, still.code_max)
-    warps[reference] = np.eye(3)
-    codes = render([view(crop, w) for w in warps], exposures, seed=seed)
+    warps, views = moving_views(crop, reference, 3, H, W, seed)
+    codes = render(views, exposures, seed=seed)
     return ExposureStack.from_arrays(codes, exposures), warps, reference
 
 
