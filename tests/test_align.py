@@ -371,6 +371,40 @@ def test_masked_remerge_keeps_the_merge_where_only_a_dropped_bracket_saw():
     assert np.allclose(radiance, 200 / 4.0)
 
 
+def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
+    """With keep weights of (nearly) 1 the re-merge is the kernel's merge, which drops
+    codes at or above the saturation policy's limits (below Z_max under ``auto``)."""
+    from hdrio.merge.masked import remerge_masked
+
+    times = np.array([1.0, 4.0])
+    z = np.arange(256.0)
+    weight = np.where((z > 0) & (z < 255), 1.0, 0.0)
+    estimates = np.stack([np.repeat((z / t)[None], 3, 0) for t in times])
+    terms = weight * estimates + 1j * weight
+    codes = np.zeros((2, 16, 16, 3), np.uint8)
+    codes[0] = 100
+    codes[1] = 250  # in the longer bracket's shoulder
+    keep = np.full((2, 2, 2), 0.999)
+    radiance = np.zeros((16, 16, 3), np.float32)
+    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance,
+                   limits=(250, 250, 250))
+    assert np.allclose(radiance, 100.0)  # the shorter bracket's alone
+    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    assert np.allclose(radiance, (100.0 + 250 / 4.0) / 2)  # Z_max alone: both count
+
+
+def test_resampling_weights_in_bands_of_rows_match_one_band(truth_scene, monkeypatch):
+    """The resampling weights are computed in bands of rows with a halo (the 5x5 window,
+    the Laplacian): bands of 8 rows give the merge of a single band."""
+    import hdrio.align.resampling as resampling
+
+    moving, _, _ = _moving(truth_scene, 0)
+    whole = merge_stack(moving, AUTO).radiance
+    monkeypatch.setattr(resampling, "BAND_PIXELS", 8 * W)
+    banded = merge_stack(moving, AUTO).radiance
+    assert np.array_equal(whole, banded)
+
+
 def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):
     """Brackets staged in a file are tested a band of cell rows at a time, each band's
     pages given back (the 9-bracket peak); the keep weights are exactly those of the
