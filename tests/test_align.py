@@ -348,18 +348,22 @@ def test_ward2003_stays_put_without_evidence():
     assert align_Ward2003(reference, np.full((96, 128), 255.0), 5) == (0, 0)
 
 
-def test_masked_remerge_keeps_the_merge_where_only_a_dropped_bracket_saw():
-    from hdrio.merge.masked import remerge_masked
-
-    # Two brackets (1 s, 4 s), one channel's tables for all three: weight 1 on codes
-    # 1..254, none at 255 (Z_max); estimate z / dt.
+def _two_brackets():
+    """Two brackets (1 s, 4 s), one channel's tables for all three: weight 1 on codes
+    1..254, none at 255 (Z_max); estimate z / dt; 16x16 codes, the shorter at 100."""
     times = np.array([1.0, 4.0])
     z = np.arange(256.0)
     weight = np.where((z > 0) & (z < 255), 1.0, 0.0)
     estimates = np.stack([np.repeat((z / t)[None], 3, 0) for t in times])
-    terms = weight * estimates + 1j * weight
     codes = np.zeros((2, 16, 16, 3), np.uint8)
     codes[0] = 100
+    return weight * estimates + 1j * weight, estimates, codes
+
+
+def test_masked_remerge_keeps_the_merge_where_only_a_dropped_bracket_saw():
+    from hdrio.merge.masked import remerge_masked
+
+    terms, estimates, codes = _two_brackets()
     codes[1] = 255  # the reference, clipped: only the shorter bracket sees the scene
     keep = np.ones((2, 2, 2))
     keep[0] = 0.0  # ... and it is dropped
@@ -376,13 +380,7 @@ def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
     codes at or above the saturation policy's limits (below Z_max under ``auto``)."""
     from hdrio.merge.masked import remerge_masked
 
-    times = np.array([1.0, 4.0])
-    z = np.arange(256.0)
-    weight = np.where((z > 0) & (z < 255), 1.0, 0.0)
-    estimates = np.stack([np.repeat((z / t)[None], 3, 0) for t in times])
-    terms = weight * estimates + 1j * weight
-    codes = np.zeros((2, 16, 16, 3), np.uint8)
-    codes[0] = 100
+    terms, estimates, codes = _two_brackets()
     codes[1] = 250  # in the longer bracket's shoulder
     keep = np.full((2, 2, 2), 0.999)
     radiance = np.zeros((16, 16, 3), np.float32)
