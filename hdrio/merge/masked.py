@@ -7,8 +7,9 @@ overwrites them:
 
 ``sum = sum * (1 - m_j s_j) + m_j t_j(z_j)`` over the brackets, longest first,
 
-with ``s_j`` 1 where the code is saturated (the kernel's reset, so ``m_j = 1``
-everywhere gives the kernel's result) and ``t_j`` the table's term. A dropped bracket
+with ``s_j`` 1 where the code is at or above the saturation policy's limit (the
+kernel's reset, so ``m_j = 1`` everywhere gives the kernel's result) and ``t_j`` the
+table's term. A dropped bracket
 (``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
 object that clips says nothing about the scene behind it. Weights are given on a grid
 of cells and interpolated bilinearly between cell centres (the masks are feathered:
@@ -42,7 +43,7 @@ def _corner(position, size):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _remerge(codes, keep, touched, cell, terms, estimates, code_max, per_channel,
+def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
              log_domain, out):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
     rows, cols = touched.shape
@@ -68,10 +69,10 @@ def _remerge(codes, keep, touched, cell, terms, estimates, code_max, per_channel
                         best = -1
                         for j in range(count - 1, -1, -1):
                             z = codes[j, y, x, c]
-                            saturated = z == code_max
+                            saturated = z >= limits[c]
                             if not per_channel:
                                 for k in range(channels):
-                                    saturated |= codes[j, y, x, k] == code_max
+                                    saturated |= codes[j, y, x, k] >= limits[k]
                             reset = 1.0 - m[j] * saturated
                             numerator = numerator * reset + m[j] * terms[j, c, z].real
                             denominator = denominator * reset + m[j] * terms[j, c, z].imag
@@ -96,7 +97,8 @@ def _remerge(codes, keep, touched, cell, terms, estimates, code_max, per_channel
 
 def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.ndarray,
                    estimates: np.ndarray, code_max: int, per_channel: bool,
-                   log_domain: bool, radiance: np.ndarray) -> int:
+                   log_domain: bool, radiance: np.ndarray,
+                   limits: tuple[int, ...] | np.ndarray | None = None) -> int:
     """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
     weight is below 1; returns how many cells were re-merged.
 
@@ -111,14 +113,26 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         :func:`hdrio.merge.debevec1997.merge_tables`' tables, ``(P, C, levels)``.
     per_channel, log_domain
         The saturation policy (``channel``) and the merge domain (``log``).
+    limits
+        ``(C,)`` the first code the merge's saturation policy drops per channel
+        (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`; ``Z_max`` when not
+        given): a code at or above it resets the sums as a saturated one, so that keep
+        weights of 1 give the kernel's merge (the ``auto`` policy's limits are below
+        ``Z_max`` by the noise margin and the shoulders).
     """
     low = keep.min(axis=0) < 1.0
     if not low.any():
         return 0
-    touched = scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
+    # Cells' weights reach the neighbouring cells (bilinear); a pixel's (cell 1) do not.
+    touched = low if cell == 1 else scipy.ndimage.binary_dilation(low, np.ones((3, 3), bool))
+    channels = codes.shape[-1]
+    limits = np.full(channels, code_max, np.int64) if limits is None else \
+        np.clip(np.asarray(limits, np.int64), 1, code_max)
+    terms = np.array(terms, np.complex128)  # a copy: dropped codes never count
+    for c, limit in enumerate(limits):
+        terms[:, c, limit:] = 0.0
     _remerge(codes, np.ascontiguousarray(
         keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
-             np.ascontiguousarray(terms, np.complex128),
-             np.ascontiguousarray(estimates, np.float64), code_max, per_channel,
+             terms, np.ascontiguousarray(estimates, np.float64), limits, per_channel,
              log_domain, radiance)
     return int(np.count_nonzero(touched))
