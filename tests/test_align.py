@@ -41,15 +41,12 @@ def truth_scene(request):
 
 
 def _moving(truth_scene, seed: int):
-    from tests.align_truth import euclidean, render, view
+    from tests.align_truth import moving_views, render
 
     crop, truth, exposures, still = truth_scene
-    rng = np.random.default_rng(seed)
-    warps = [euclidean(*rng.uniform(-8, 8, 2), rng.uniform(-0.5, 0.5), H, W)
-             for _ in range(3)]
     reference = reference_bracket(still.codes, still.code_max)
-    warps[reference] = np.eye(3)
-    codes = render([view(crop, w) for w in warps], exposures, seed=seed)
+    warps, views = moving_views(crop, reference, 3, H, W, seed)
+    codes = render(views, exposures, seed=seed)
     return ExposureStack.from_arrays(codes, exposures), warps, reference
 
 
@@ -84,23 +81,27 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     aligned = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
     unaligned = radiance_error(merge_stack(moving, MergeOptions(align="off", deghost="off"))
                                .radiance, truth, inner)
-    # The issue's median bound: 1.5x the still stack's (measured 1.36x with the default
-    # inverse-variance merge, 1.23x with the log merge). Its p99 bound of 2x is NOT met:
-    # with the log merge 2.26x, the same with the exact transforms and with spline
-    # interpolation of order 3 or 5 (a resampled aliased image differs from the still one
-    # at sharp edges whatever the interpolator); with the inverse-variance merge 5.3x
-    # (0.217 against 0.041: the still stack's p99 fell from 0.054, the warped one's rose
-    # from 0.121, with deghosting on or off): the noise-optimal weights lean on the
-    # longest unsaturated bracket, where a warp's edge errors are not averaged away.
-    # Bounds here so that a regression shows: 2.5x (log) and 6x (default).
+    # The issue's bounds: median 1.5x and p99 2x the still stack's. A warped bracket is
+    # off at sharp edges by a fraction of the edge's step (the scene is sampled without a
+    # band-limiting filter: warped and warped back in floating point by a cubic spline,
+    # a bracket's ideal radiance is 41-57 % off at its p99), which the noise model does
+    # not know; the merge lowers each warped bracket's weight there by var_noise /
+    # (var_noise + var_resample), var_resample measured against the unwarped reference
+    # (hdrio.align.resampling). Measured, seeds 0 / 1 / 2: default (inverse-variance)
+    # median 1.35x / 1.12x / 1.05x, p99 2.30x / 2.06x / 1.97x (5.2x / 4.9x / 4.8x
+    # without); log merge p99 1.66x / 1.56x / 1.42x. The default's p99 bound of 2x is met
+    # on seed 2 only: weights from the true per-pixel error would give 1.83x / 1.72x, so
+    # what is left is the estimate's (measured against the reference, here the shortest
+    # and noisiest bracket). Bounds here with about 10 % margin: 2.5x (default), 1.85x
+    # (log).
     # Without alignment the same stack is 6x and 10x off.
     assert aligned["median"] <= 1.5 * base["median"], (aligned, base)
-    assert aligned["p99"] <= 6 * base["p99"], (aligned, base)
+    assert aligned["p99"] <= 2.5 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
     log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
-    assert log_aligned["p99"] <= 2.5 * log_base["p99"], (log_aligned, log_base)
+    assert log_aligned["p99"] <= 1.85 * log_base["p99"], (log_aligned, log_base)
     assert unaligned["median"] > 3 * base["median"]
 
 
@@ -388,6 +389,18 @@ def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
     assert np.allclose(radiance, 100.0)  # the shorter bracket's alone
     remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
     assert np.allclose(radiance, (100.0 + 250 / 4.0) / 2)  # Z_max alone: both count
+
+
+def test_resampling_weights_in_bands_of_rows_match_one_band(truth_scene, monkeypatch):
+    """The resampling weights are computed in bands of rows with a halo (the 5x5 window,
+    the Laplacian): bands of 8 rows give the merge of a single band."""
+    import hdrio.align.resampling as resampling
+
+    moving, _, _ = _moving(truth_scene, 0)
+    whole = merge_stack(moving, AUTO).radiance
+    monkeypatch.setattr(resampling, "BAND_PIXELS", 8 * W)
+    banded = merge_stack(moving, AUTO).radiance
+    assert np.array_equal(whole, banded)
 
 
 def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):
