@@ -163,9 +163,10 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     weights)
 
-    def remerge(codes, keep, out, cell=CELL):
-        remerge_masked(codes, keep, cell, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out, limits)
+    def remerge(codes, keep, out, first_row=0, factors=None, lowered=None):
+        remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
+                       domain == "log", out, limits, first_row=first_row, factors=factors,
+                       lowered=lowered)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, radiance)
@@ -174,8 +175,8 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
         noise = fit_noise(stack.codes, stack.exposures, response)
     reference = motion.alignment.reference
     allowed = consistency_variance(response, stack.exposures, noise)
-    remerge_resampled(stack.codes, limits, motion.keep, CELL, reference,
+    remerge_resampled(stack.codes, stack.code_max, limits, motion.keep, CELL, reference,
                       comparametric_correction(stack.codes, linear_tables(
                           response, stack.exposures), allowed, reference),
                       observation_variance(response, stack.exposures, noise), allowed,
-                      lambda codes, keep, out: remerge(codes, keep, out, 1), radiance)
+                      terms.imag, remerge, radiance)
