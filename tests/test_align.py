@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from hdrio.align.lucaskanade import corner_motion
-from hdrio.align.registration import align_stack, estimate_alignment, reference_bracket
+from hdrio.align.registration import (
+    Alignment,
+    align_stack,
+    estimate_alignment,
+    reference_bracket,
+)
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.pipeline import MergeOptions, merge_stack
@@ -401,6 +406,89 @@ def test_resampling_weights_in_bands_of_rows_match_one_band(truth_scene, monkeyp
     monkeypatch.setattr(resampling, "BAND_PIXELS", 8 * W)
     banded = merge_stack(moving, AUTO).radiance
     assert np.array_equal(whole, banded)
+
+
+def _confidence_by_numpy(codes, reference, estimates, noise, allowed, limits, scale):
+    """:func:`hdrio.align.resampling.resampling_confidence`'s formula, spelt out with
+    ``scipy.ndimage`` (the 5x5 sums as a uniform filter, edges repeated)."""
+    import scipy.ndimage
+
+    from hdrio.align.resampling import COVERED, FULL, SIGNIFICANCE, WINDOW
+
+    factor = np.ones(codes.shape[:2])
+    for c in range(codes.shape[-1]):
+        z, zr = codes[..., c].astype(np.int64), reference[..., c].astype(np.int64)
+        a = allowed[0, c][z] + allowed[1, c][zr]
+        ok = np.isfinite(a) & (z < limits[c]) & (zr < limits[c])
+        a = np.where(ok, a * scale, 0.0)
+        e = np.where(ok, (estimates[0, c][z] - estimates[1, c][zr]) ** 2 - a, 0.0)
+        e, a, b = (scipy.ndimage.uniform_filter(v, WINDOW, mode="nearest") * WINDOW ** 2
+                   for v in (e, a, ok.astype(float)))
+        x = np.pad(estimates[0, c][z], 1, mode="edge")
+        h = x[1:-1, 1:-1] - 0.25 * (x[:-2, 1:-1] + x[2:, 1:-1] + x[1:-1, :-2] + x[1:-1, 2:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            measured = np.maximum(0.0, (e - SIGNIFICANCE * np.sqrt(2.0 / b) * a) / b)
+            resample = np.where(b / WINDOW ** 2 > COVERED, measured, h * h)
+            variance = scale * noise[0, c][z]
+            f = variance / (variance + resample)
+        use = (z < limits[c]) & np.isfinite(f)
+        factor = np.where(use, np.minimum(factor, f), factor)
+    return np.where(factor > FULL, 1.0, factor)
+
+
+def test_resampling_confidence_matches_its_formula(truth_scene):
+    """The kernel (runs of cells, running window sums, a band's rows with their halo)
+    gives the formula's factors, computed here with scipy.ndimage, to float rounding
+    (1e-5: sums in a different order); outside the cells asked for, 1."""
+    from hdrio.align.deghost import comparametric_correction, consistency_variance
+    from hdrio.align.registration import linear_tables
+    from hdrio.align.resampling import resampling_confidence
+    from hdrio.merge.noise import fit_noise, observation_variance
+
+    moving, warps, reference = _moving(truth_scene, 1)
+    stack = align_stack(moving, Alignment(reference, np.stack(warps), "euclidean",
+                                          (1.0,) * 3, ()))
+    response = merge_stack(moving, MergeOptions(align="off", deghost="off")).response
+    noise = fit_noise(stack.codes, stack.exposures, response)
+    allowed = consistency_variance(response, stack.exposures, noise)
+    estimates = comparametric_correction(stack.codes, linear_tables(response, stack.exposures),
+                                         allowed, reference)
+    variance = observation_variance(response, stack.exposures, noise)
+    j = 0 if reference else 1
+    pair = [j, reference]
+    limits = np.full(3, stack.code_max - 5)
+    args = (stack.codes[j], stack.codes[reference], estimates[pair], variance[pair],
+            allowed[pair], limits, 1.3)
+    expected = _confidence_by_numpy(*args)
+    assert (expected < 0.5).mean() > 0.01  # the test has something to find
+    assert np.allclose(resampling_confidence(*args), expected, rtol=0, atol=1e-5)
+    top, rows = 37, 64  # a band: rows 37 .. 100, its neighbours read
+    cells = np.zeros((rows // 8, W // 8), bool)
+    cells[::3, ::2] = True
+    band = resampling_confidence(*args, cells=cells, offset=top, rows=rows)
+    inside = np.kron(cells, np.ones((8, 8), bool))
+    assert np.allclose(band[inside], expected[top:top + rows][inside], rtol=0, atol=1e-5)
+    assert np.all(band[~inside] == 1.0)
+
+
+def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch):
+    """Computed only in cells near a warped bracket's edges where it carries weight
+    (EDGE, SHARE), the resampling weights give the merge of every cell computed, within
+    1 % of its p99 and 0.5 % of its median error against the truth (measured on seeds 0
+    and 2: the same to 0.1 %)."""
+    import hdrio.align.resampling as resampling
+
+    _, truth, _, still = truth_scene
+    inner = _inner(still)
+    for seed in (0, 2):
+        moving, _, _ = _moving(truth_scene, seed)
+        fast = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
+        with monkeypatch.context() as patch:
+            patch.setattr(resampling, "EDGE", 0.0)
+            patch.setattr(resampling, "SHARE", 0.0)
+            every = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
+        assert abs(fast["p99"] / every["p99"] - 1) < 0.01, (seed, fast, every)
+        assert abs(fast["median"] / every["median"] - 1) < 0.005, (seed, fast, every)
 
 
 def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):

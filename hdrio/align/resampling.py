@@ -65,7 +65,7 @@ SHARE = 0.02
 """A warped bracket's resampling weights are computed only in cells where it can carry
 this share of the merge's weight (at its largest over the cell's codes, the other
 brackets' at their smallest): elsewhere lowering it moves the merge by less."""
-BAND_PIXELS = 1 << 20
+BAND_PIXELS = 1 << 21
 """About this many pixels of each bracket a band (9 brackets of 24 MP: a few tens of MB
 of weights and estimates at a time)."""
 
@@ -114,9 +114,8 @@ def _edge_cells(start, stop, codes, code_max, threshold, cell, offset, rows, fla
     n = width * channels
     inner = n - 2 * channels
     peak = np.zeros((stop - start, n), np.int32)
-    least = np.empty((stop - start, n), codes.dtype)
-    most = np.zeros((stop - start, n), codes.dtype)
-    least[:] = code_max
+    least = np.full((stop - start, n), code_max, np.int32)
+    most = np.zeros((stop - start, n), np.int32)
     row = np.empty(n, np.int32)
     for y in range(max(0, offset + start * cell - HALO),
                    min(height, offset + min(stop * cell, rows) + HALO)):
@@ -138,8 +137,10 @@ def _edge_cells(start, stop, codes, code_max, threshold, cell, offset, rows, fla
             p, lo, hi = peak[cy - start], least[cy - start], most[cy - start]
             for k in range(n):
                 p[k] = max(p[k], row[k])
-                lo[k] = min(lo[k], here[k])
-                hi[k] = max(hi[k], here[k])
+            for k in range(n):
+                lo[k] = min(lo[k], np.int32(here[k]))
+            for k in range(n):
+                hi[k] = max(hi[k], np.int32(here[k]))
     for cy in range(start, stop):
         p, lo, hi = peak[cy - start], least[cy - start], most[cy - start]
         for cx in range(flags.shape[1]):
@@ -351,20 +352,19 @@ def range_tables(weights: np.ndarray, limits) -> tuple[np.ndarray, np.ndarray, i
     return most, least, shift
 
 
-def weighty_cells(low: np.ndarray, high: np.ndarray, keep: np.ndarray, tables,
+def weighty_cells(low: np.ndarray, high: np.ndarray, kept: np.ndarray, tables,
                   limits) -> np.ndarray:
     """``(P, rows, cols)`` bool: the cells where a bracket can carry :data:`SHARE` of the
     merge's weight in some channel, from each bracket's codes' range there ``low``,
     ``high`` ``(P, rows, cols, C)`` and :func:`range_tables`: its largest weight over the
     range against the others' smallest (0 where a bracket is saturated in some channel,
-    or where ``keep`` ``(P, rows, cols)``, the cells' keep weights, lowers it, taken at
-    their smallest over the cell and its neighbours)."""
+    or where ``kept`` ``(P, rows, cols)``, the cells' keep weights at their smallest over
+    the cell and its neighbours, lowers it)."""
     most, least, shift = tables
     count, channels = low.shape[0], low.shape[-1]
     lo, hi = low.astype(np.int64) >> shift, high.astype(np.int64) >> shift
     saturated = (high >= np.asarray(limits)).any(axis=-1)
-    kept = np.stack([scipy.ndimage.minimum_filter(k, 3, mode="nearest") for k in keep])
-    kept[saturated] = 0.0
+    kept = np.where(saturated, 0.0, kept)
     largest = np.stack([most[j, c][lo[j, ..., c], hi[j, ..., c]]
                         for j in range(count) for c in range(channels)]).reshape(
         (count, channels) + low.shape[1:3])
@@ -380,12 +380,12 @@ def weighty_cells(low: np.ndarray, high: np.ndarray, keep: np.ndarray, tables,
 def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarray | None,
                       cell: int, reference: int, estimates: np.ndarray, noise: np.ndarray,
                       allowed: np.ndarray, weights: np.ndarray, remerge,
-                      radiance: np.ndarray, edge: float = EDGE) -> None:
+                      radiance: np.ndarray) -> None:
     """Re-merge ``radiance`` ``(H, W, C)`` in bands of rows with every bracket's keep
     weight on ``cells`` (or 1) times, but for the ``reference`` (never warped), its
-    :func:`resampling_confidence` in the cells :func:`edge_cells` finds (``edge``; 0:
-    every cell) where it can carry :data:`SHARE` of the merge's ``weights`` (``(P, C,
-    levels)``, :func:`weighty_cells`).
+    :func:`resampling_confidence` in the cells :func:`edge_cells` finds (:data:`EDGE`;
+    0: every cell) where it can carry :data:`SHARE` of the merge's ``weights`` (``(P, C,
+    levels)``, :func:`weighty_cells`; 0: every cell).
 
     ``limits``: the merge's saturation limits, ``(C,)`` codes; ``estimates``, ``noise``,
     ``allowed``: ``(P, C, levels)`` tables (see :func:`resampling_confidence`).
@@ -399,6 +399,7 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
     if cells is None:
         cells = np.ones((count, -(-height // cell), -(-width // cell)), np.float32)
     tables = range_tables(weights, limits)
+    kept = np.stack([scipy.ndimage.minimum_filter(k, 3, mode="nearest") for k in cells])
     band = max(1, BAND_PIXELS // max(1, width) // cell) * cell
     step = max(1, int(np.sqrt(height * width / SAMPLES)))
     grid = np.ascontiguousarray(codes[:, step // 2::step, step // 2::step]).reshape(
@@ -407,13 +408,14 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
                                  allowed[[j, reference]], limits) for j in range(count)]
     for top in range(0, height, band):
         bottom = min(height, top + band)
-        above, below = max(0, top - HALO), min(height, bottom + HALO)
+        # the halo's rows and their neighbours (edge_cells' Laplacian at the halo's edge)
+        above, below = max(0, top - HALO - 1), min(height, bottom + HALO + 1)
         rows = slice(top // cell, -(-bottom // cell))
-        found = [edge_cells(codes[j, above:below], code_max, cell, edge, top - above,
+        found = [edge_cells(codes[j, above:below], code_max, cell, EDGE, top - above,
                             bottom - top) for j in range(count)]
-        near = np.stack([f[0] for f in found]) | (edge <= 0)
+        near = np.stack([f[0] for f in found]) | (EDGE <= 0)
         near &= weighty_cells(np.stack([f[1] for f in found]), np.stack([f[2] for f in found]),
-                              cells[:, rows], tables, limits)
+                              kept[:, rows], tables, limits)
         factors = np.ones((count, bottom - top, width), np.float32)
         lowered = np.zeros(near.shape, np.bool_)
         for j in range(count):
