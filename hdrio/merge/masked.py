@@ -52,11 +52,22 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
         m = np.empty(count)
         values = np.empty(channels)
         for cx in range(cols):
-            if not touched[cy, cx]:
+            whole = touched[cy, cx]  # else only the pixels a factor below 1 lowers
+            some = False
+            if scaled:
+                for j in range(count):
+                    some |= lowered[j, cy, cx]
+            if not whole and not some:
                 continue
             for y in range(cy * cell, min(height, (cy + 1) * cell)):
                 y0, y1, wy = _corner((first + y + 0.5) / cell, rows)
                 for x in range(cx * cell, min(width, (cx + 1) * cell)):
+                    if not whole:
+                        low = False
+                        for j in range(count):
+                            low |= lowered[j, cy, cx] and factors[j, y, x] < 1.0
+                        if not low:
+                            continue
                     x0, x1, wx = _corner((x + 0.5) / cell, cols)
                     for j in range(count):
                         k = keep[j]
@@ -128,8 +139,8 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         A band of rows: ``codes`` and ``radiance`` are rows ``first_row ..`` (a multiple
         of ``cell``) of the image ``keep`` covers. ``factors`` ``(P, rows, W)`` float32
         multiply the keep weights per pixel (:mod:`hdrio.align.resampling`), read only in
-        the band's cells where ``lowered`` ``(P, cell rows, cols)`` is true; those cells
-        are re-merged too.
+        the band's cells where ``lowered`` ``(P, cell rows, cols)`` is true; there the
+        pixels a factor below 1 lowers are re-merged too.
     """
     band = slice(first_row // cell, first_row // cell + -(-codes.shape[1] // cell))
     low = keep.min(axis=0) < 1.0
@@ -138,11 +149,11 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         low, np.ones((3, 3), bool))
     touched = touched[band]
     if lowered is None:
+        if not touched.any():
+            return 0
         factors = np.ones((codes.shape[0], 0, 0), np.float32)
         lowered = np.zeros((codes.shape[0], 0, 0), bool)
-    else:
-        touched = touched | lowered.any(axis=0)
-    if not touched.any():
+    elif not touched.any() and not lowered.any():
         return 0
     channels = codes.shape[-1]
     limits = np.full(channels, code_max, np.int64) if limits is None else \
