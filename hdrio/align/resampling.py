@@ -161,7 +161,8 @@ def _edge_cells(start, stop, codes, code_max, threshold, cell, offset, rows, fla
 def resampling_confidence(codes: np.ndarray, reference: np.ndarray, estimates: np.ndarray,
                           noise: np.ndarray, allowed: np.ndarray, limits, scale: float = 1.0,
                           cells: np.ndarray | None = None, cell: int = 8, offset: int = 0,
-                          rows: int | None = None) -> np.ndarray:
+                          rows: int | None = None, out: np.ndarray | None = None
+                          ) -> np.ndarray:
     """``var_noise / (var_noise + var_resample)`` of one warped bracket ``j`` (module
     docstring), ``(rows, W)`` float32: the smallest over the channels the merge uses (a
     channel at or above its saturation limit, or of infinite noise variance, does not
@@ -195,12 +196,15 @@ def resampling_confidence(codes: np.ndarray, reference: np.ndarray, estimates: n
     offset, rows
         The rows computed: ``offset .. offset + rows - 1`` of ``codes`` (the rows around
         them are read: a band of rows with its halo); all of them by default.
+    out
+        ``(rows, W)`` float32 to write the factors to (else a new array).
     """
     height, width, _ = codes.shape
     rows = height - offset if rows is None else rows
     if cells is None:
         cells = np.ones((-(-rows // cell), -(-width // cell)), np.bool_)
-    factor = np.ones((rows, width), np.float32)
+    factor = np.empty((rows, width), np.float32) if out is None else out
+    factor[...] = 1.0
     on_threads(_confidence, cells.shape[0], np.ascontiguousarray(codes),
                np.ascontiguousarray(reference), *(np.ascontiguousarray(t, np.float64)
                                                   for t in (estimates, noise, allowed)),
@@ -389,7 +393,7 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
 
     ``limits``: the merge's saturation limits, ``(C,)`` codes; ``estimates``, ``noise``,
     ``allowed``: ``(P, C, levels)`` tables (see :func:`resampling_confidence`).
-    ``remerge`` (``codes_band, keep, radiance_band, first_row, factors, lowered``)
+    ``remerge`` (``codes, keep, radiance, first_row, rows, factors, lowered``)
     re-merges one band (:func:`hdrio.merge.masked.remerge_masked` with the merge's
     tables, its cells of ``cell`` pixels). Staged brackets' pages are given back after
     each band.
@@ -416,20 +420,19 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
         near = np.stack([f[0] for f in found]) | (EDGE <= 0)
         near &= weighty_cells(np.stack([f[1] for f in found]), np.stack([f[2] for f in found]),
                               kept[:, rows], tables, limits)
-        factors = np.ones((count, bottom - top, width), np.float32)
+        factors = np.empty((count, bottom - top, width), np.float32)  # read where lowered
         lowered = np.zeros(near.shape, np.bool_)
         for j in range(count):
             if j == reference or not near[j].any():
                 continue
             pair = [j, reference]
-            factors[j] = resampling_confidence(
+            resampling_confidence(
                 codes[j, above:below], codes[reference, above:below], estimates[pair],
                 noise[pair], allowed[pair], limits, scales[j], near[j], cell, top - above,
-                bottom - top)
+                bottom - top, factors[j])
             low = factors[j] < 1.0
             lowered[j] = np.pad(low, ((0, (-low.shape[0]) % cell), (0, (-width) % cell))
                                 ).reshape(lowered.shape[1], cell, lowered.shape[2], cell
                                           ).any(axis=(1, 3))
-        remerge(np.ascontiguousarray(codes[:, top:bottom]), cells, radiance[top:bottom], top,
-                factors, lowered)
+        remerge(codes, cells, radiance, top, bottom - top, factors, lowered)
         release(codes, None, 0, bottom)

@@ -163,10 +163,10 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     weights)
 
-    def remerge(codes, keep, out, first_row=0, factors=None, lowered=None):
+    def remerge(codes, keep, out, first_row=0, rows=None, factors=None, lowered=None):
         remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out, limits, first_row=first_row, factors=factors,
-                       lowered=lowered)
+                       domain == "log", out, limits, first_row=first_row, rows=rows,
+                       factors=factors, lowered=lowered)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, radiance)

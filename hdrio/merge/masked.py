@@ -46,6 +46,7 @@ def _corner(position, size):  # pragma: no cover - compiled
 def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
              log_domain, out, first, factors, lowered):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
+    height = min(height, first + touched.shape[0] * cell)  # the band's rows
     rows, cols = keep.shape[1], keep.shape[2]
     scaled = lowered.shape[1] > 0
     for cy in prange(touched.shape[0]):
@@ -59,13 +60,13 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
                     some |= lowered[j, cy, cx]
             if not whole and not some:
                 continue
-            for y in range(cy * cell, min(height, (cy + 1) * cell)):
-                y0, y1, wy = _corner((first + y + 0.5) / cell, rows)
+            for y in range(first + cy * cell, min(height, first + (cy + 1) * cell)):
+                y0, y1, wy = _corner((y + 0.5) / cell, rows)
                 for x in range(cx * cell, min(width, (cx + 1) * cell)):
                     if not whole:
                         low = False
                         for j in range(count):
-                            low |= lowered[j, cy, cx] and factors[j, y, x] < 1.0
+                            low |= lowered[j, cy, cx] and factors[j, y - first, x] < 1.0
                         if not low:
                             continue
                     x0, x1, wx = _corner((x + 0.5) / cell, cols)
@@ -74,7 +75,7 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
                         m[j] = ((1.0 - wy) * ((1.0 - wx) * k[y0, x0] + wx * k[y0, x1])
                                 + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
                         if scaled and lowered[j, cy, cx]:
-                            m[j] *= factors[j, y, x]
+                            m[j] *= factors[j, y - first, x]
                     only_dropped = False
                     for c in range(channels):
                         numerator = 0.0
@@ -113,8 +114,9 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
                    estimates: np.ndarray, code_max: int, per_channel: bool,
                    log_domain: bool, radiance: np.ndarray,
                    limits: tuple[int, ...] | np.ndarray | None = None, *,
-                   first_row: int = 0, factors: np.ndarray | None = None,
-                   lowered: np.ndarray | None = None) -> int:
+                   first_row: int = 0, rows: int | None = None,
+                   factors: np.ndarray | None = None, lowered: np.ndarray | None = None
+                   ) -> int:
     """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
     weight is below 1; returns how many cells were re-merged.
 
@@ -135,19 +137,21 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         given): a code at or above it resets the sums as a saturated one, so that keep
         weights of 1 give the kernel's merge (the ``auto`` policy's limits are below
         ``Z_max`` by the noise margin and the shoulders).
-    first_row, factors, lowered
-        A band of rows: ``codes`` and ``radiance`` are rows ``first_row ..`` (a multiple
-        of ``cell``) of the image ``keep`` covers. ``factors`` ``(P, rows, W)`` float32
+    first_row, rows, factors, lowered
+        A band: only rows ``first_row .. first_row + rows - 1`` (``first_row`` a multiple
+        of ``cell``; all rows by default) are re-merged. ``factors`` ``(P, rows, W)`` float32
         multiply the keep weights per pixel (:mod:`hdrio.align.resampling`), read only in
         the band's cells where ``lowered`` ``(P, cell rows, cols)`` is true; there the
         pixels a factor below 1 lowers are re-merged too.
     """
-    band = slice(first_row // cell, first_row // cell + -(-codes.shape[1] // cell))
-    low = keep.min(axis=0) < 1.0
+    rows = codes.shape[1] - first_row if rows is None else rows
+    start, stop = first_row // cell, -(-(first_row + rows) // cell)
+    above = max(0, start - 1)  # the band's cells and their neighbours
+    low = keep[:, above:stop + 1].min(axis=0) < 1.0
     # Cells' weights reach the neighbouring cells (bilinear); a pixel's (cell 1) do not.
     touched = low if cell == 1 or not low.any() else scipy.ndimage.binary_dilation(
         low, np.ones((3, 3), bool))
-    touched = touched[band]
+    touched = touched[start - above:stop - above]
     if lowered is None:
         if not touched.any():
             return 0
