@@ -474,8 +474,8 @@ def test_resampling_confidence_matches_its_formula(truth_scene):
 def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch):
     """Computed only in cells near a warped bracket's edges where it carries weight
     (EDGE, SHARE), the resampling weights give the merge of every cell computed, within
-    1 % of its p99 and 0.5 % of its median error against the truth (measured on seeds 0
-    and 2: the same to 0.1 %)."""
+    1 % of its p99 and 0.5 % of its median error against the truth (measured, seeds 0-3:
+    p99 0.09 / 0.38 / 0.42 / 0.77 % higher, median 0.12-0.23 %)."""
     import hdrio.align.resampling as resampling
 
     _, truth, _, still = truth_scene
