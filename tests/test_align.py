@@ -477,6 +477,7 @@ def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch)
     1 % of its p99 and 0.5 % of its median error against the truth (measured, seeds 0-3:
     p99 0.09 / 0.38 / 0.42 / 0.77 % higher, median 0.12-0.23 %)."""
     import hdrio.align.resampling as resampling
+    from hdrio.align import shares
 
     _, truth, _, still = truth_scene
     inner = _inner(still)
@@ -485,7 +486,7 @@ def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch)
         fast = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
         with monkeypatch.context() as patch:
             patch.setattr(resampling, "EDGE", 0.0)
-            patch.setattr(resampling, "SHARE", 0.0)
+            patch.setattr(shares, "SHARE", 0.0)
             every = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
         assert abs(fast["p99"] / every["p99"] - 1) < 0.01, (seed, fast, every)
         assert abs(fast["median"] / every["median"] - 1) < 0.005, (seed, fast, every)

@@ -41,6 +41,8 @@ import numpy as np
 import scipy.ndimage
 from numba import njit
 
+from hdrio.align import shares
+from hdrio.align.shares import range_tables, weighty_cells
 from hdrio.io.staging import release
 from hdrio.parallel import on_threads
 
@@ -61,10 +63,6 @@ SAMPLES = 100_000
 """About this many pixels a bracket measure :func:`disagreement_scale`."""
 FULL = 0.999
 """Factors above this are taken as 1 (the pixel is not re-merged for them)."""
-SHARE = 0.02
-"""A warped bracket's resampling weights are computed only in cells where it can carry
-this share of the merge's weight (at its largest over the cell's codes, the other
-brackets' at their smallest): elsewhere lowering it moves the merge by less."""
 BAND_PIXELS = 1 << 21
 """About this many pixels of each bracket a band (9 brackets of 24 MP: a few tens of MB
 of weights and estimates at a time)."""
@@ -333,54 +331,6 @@ def disagreement_scale(codes: np.ndarray, reference: np.ndarray, estimates: np.n
     return max(1.0, float(np.median(ratios))) if ratios.size else 1.0
 
 
-def range_tables(weights: np.ndarray, limits) -> tuple[np.ndarray, np.ndarray, int]:
-    """The largest and smallest of each bracket's merge weight ``(P, C, levels)`` over
-    every range of codes, ``(P, C, bins, bins)`` float32 indexed by the range's first
-    and last code shifted right by the returned shift (bins of at most 256 codes' worth:
-    a 16-bit range is read on bins of 256 codes, taking the extremes of the bins it
-    touches). Codes at or above ``limits`` (``(C,)``) weigh 0."""
-    count, channels, levels = weights.shape
-    shift = max(0, int(np.ceil(np.log2(levels / 256.0))))
-    w = np.array(weights, np.float64)
-    for c in range(channels):
-        w[:, c, int(limits[c]):] = 0.0
-    bins = -(-levels // (1 << shift))
-    padded = np.pad(w, ((0, 0), (0, 0), (0, bins * (1 << shift) - levels)), mode="edge")
-    binned = padded.reshape(count, channels, bins, 1 << shift)
-    most_bin, least_bin = binned.max(axis=-1), binned.min(axis=-1)
-    most = np.zeros((count, channels, bins, bins), np.float32)
-    least = np.zeros_like(most)
-    for b in range(bins):
-        most[:, :, b, b:] = np.maximum.accumulate(most_bin[:, :, b:], axis=-1)
-        least[:, :, b, b:] = np.minimum.accumulate(least_bin[:, :, b:], axis=-1)
-    return most, least, shift
-
-
-def weighty_cells(low: np.ndarray, high: np.ndarray, kept: np.ndarray, tables,
-                  limits) -> np.ndarray:
-    """``(P, rows, cols)`` bool: the cells where a bracket can carry :data:`SHARE` of the
-    merge's weight in some channel, from each bracket's codes' range there ``low``,
-    ``high`` ``(P, rows, cols, C)`` and :func:`range_tables`: its largest weight over the
-    range against the others' smallest (0 where a bracket is saturated in some channel,
-    or where ``kept`` ``(P, rows, cols)``, the cells' keep weights at their smallest over
-    the cell and its neighbours, lowers it)."""
-    most, least, shift = tables
-    count, channels = low.shape[0], low.shape[-1]
-    lo, hi = low.astype(np.int64) >> shift, high.astype(np.int64) >> shift
-    saturated = (high >= np.asarray(limits)).any(axis=-1)
-    kept = np.where(saturated, 0.0, kept)
-    largest = np.stack([most[j, c][lo[j, ..., c], hi[j, ..., c]]
-                        for j in range(count) for c in range(channels)]).reshape(
-        (count, channels) + low.shape[1:3])
-    smallest = np.stack([least[j, c][lo[j, ..., c], hi[j, ..., c]] * kept[j]
-                         for j in range(count) for c in range(channels)]).reshape(
-        largest.shape)
-    others = smallest.sum(axis=0) - smallest  # (P, C, rows, cols)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = largest / (largest + others)
-    return (np.nan_to_num(share, nan=0.0) >= SHARE).any(axis=1)
-
-
 def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarray | None,
                       cell: int, reference: int, estimates: np.ndarray, noise: np.ndarray,
                       allowed: np.ndarray, weights: np.ndarray, remerge,
@@ -388,8 +338,9 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
     """Re-merge ``radiance`` ``(H, W, C)`` in bands of rows with every bracket's keep
     weight on ``cells`` (or 1) times, but for the ``reference`` (never warped), its
     :func:`resampling_confidence` in the cells :func:`edge_cells` finds (:data:`EDGE`;
-    0: every cell) where it can carry :data:`SHARE` of the merge's ``weights`` (``(P, C,
-    levels)``, :func:`weighty_cells`; 0: every cell).
+    0: every cell) where it can carry :data:`hdrio.align.shares.SHARE` of the merge's
+    ``weights`` (``(P, C, levels)``, :func:`hdrio.align.shares.weighty_cells`; 0: every
+    cell).
 
     ``limits``: the merge's saturation limits, ``(C,)`` codes; ``estimates``, ``noise``,
     ``allowed``: ``(P, C, levels)`` tables (see :func:`resampling_confidence`).
@@ -419,7 +370,7 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
                             bottom - top) for j in range(count)]
         near = np.stack([f[0] for f in found]) | (EDGE <= 0)
         near &= weighty_cells(np.stack([f[1] for f in found]), np.stack([f[2] for f in found]),
-                              kept[:, rows], tables, limits)
+                              kept[:, rows], tables, limits, shares.SHARE)
         factors = np.empty((count, bottom - top, width), np.float32)  # read where lowered
         lowered = np.zeros(near.shape, np.bool_)
         for j in range(count):
