@@ -237,7 +237,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         statistics = masked_statistics(stack.codes, excluded, stack.code_max, statistics)
     elif merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
-                     not statistics.pixel_rule, statistics.limits)  # the policy's
+                     not statistics.pixel_rule, statistics.limits,  # the policy's
+                     noise if noise is not None else before)
     clock.lap("deghost")
     highlights = None
     if options.highlights == "reconstruct":

@@ -4,6 +4,11 @@ The scene is cropped at twice the stack's resolution, each bracket's view warped
 (a cubic spline on radiance, then a 2x2 area average: what a sensor pixel integrates), and
 rendered through a measured camera response (DoRF) with the truth harness's noise.
 The reference bracket sees the scene unwarped, so the still stack's truth is the crop.
+
+``python -m tests.align_truth [seeds]`` prints, for the GoldenGate stack of
+``tests/test_align.py``, each seed's merged error against the same stack held still
+(median and p99 ratios, the default merge and the log merge): the table in
+docs/motion.md.
 """
 
 from __future__ import annotations
@@ -71,3 +76,50 @@ def ladder(truth: np.ndarray, frames: int = 3, ev: float = 2.0) -> np.ndarray:
     0.18 (the truth harness's ladder)."""
     key = float(np.exp(np.mean(np.log(1e-4 + truth.mean(axis=-1)))))
     return 0.18 / key * 2.0 ** (ev * (np.arange(frames) - (frames - 1) / 2.0))
+
+
+def moving_views(crop: np.ndarray, reference: int, count: int, height: int, width: int,
+                 seed: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The warps (shifts up to +-8 px, rotations up to +-0.5 deg, the reference's the
+    identity) and views of a hand-held stack of ``count`` brackets."""
+    rng = np.random.default_rng(seed)
+    warps = [euclidean(*rng.uniform(-8, 8, 2), rng.uniform(-0.5, 0.5), height, width)
+             for _ in range(count)]
+    warps[reference] = np.eye(3)
+    return warps, [view(crop, w) for w in warps]
+
+
+def main(seeds: list[int]) -> None:
+    from hdrio.align.registration import reference_bracket
+    from hdrio.pipeline import MergeOptions, merge_stack
+    from hdrio.stack import ExposureStack
+    from hdrio.synthetic import radiance_error, well_exposed
+
+    height, width, margin = 300, 400, 24  # tests/test_align.py's
+    crop = scene_crop("GoldenGate", height, width, 100, 30)
+    truth = view(crop, np.eye(3))
+    exposures = ladder(truth, 3)
+    still = ExposureStack.from_arrays(render([truth] * 3, exposures), exposures)
+    inner = np.zeros((height, width), bool)
+    inner[margin:-margin, margin:-margin] = True
+    inner &= well_exposed(still.codes, still.code_max)
+    reference = reference_bracket(still.codes, still.code_max)
+    print("seed | default median / still | default p99 / still | log median / still "
+          "| log p99 / still")
+    for seed in seeds:
+        _, views = moving_views(crop, reference, 3, height, width, seed)
+        moving = ExposureStack.from_arrays(render(views, exposures, seed=seed), exposures)
+        ratios = []
+        for merge in ("inverse-variance", "log"):
+            base = radiance_error(merge_stack(still, MergeOptions(merge=merge)).radiance,
+                                  truth, inner)
+            aligned = radiance_error(merge_stack(moving, MergeOptions(merge=merge)).radiance,
+                                     truth, inner)
+            ratios += [aligned["median"] / base["median"], aligned["p99"] / base["p99"]]
+        print(f"{seed} | " + " | ".join(f"{r:.2f}" for r in ratios))
+
+
+if __name__ == "__main__":
+    import sys
+
+    main([int(a) for a in sys.argv[1:]] or [0, 1, 2, 3])

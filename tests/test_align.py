@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from hdrio.align.lucaskanade import corner_motion
-from hdrio.align.registration import align_stack, estimate_alignment, reference_bracket
+from hdrio.align.registration import (
+    Alignment,
+    align_stack,
+    estimate_alignment,
+    reference_bracket,
+)
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.merge_job import MergeOptions
@@ -42,15 +47,12 @@ def truth_scene(request):
 
 
 def _moving(truth_scene, seed: int):
-    from tests.align_truth import euclidean, render, view
+    from tests.align_truth import moving_views, render
 
     crop, truth, exposures, still = truth_scene
-    rng = np.random.default_rng(seed)
-    warps = [euclidean(*rng.uniform(-8, 8, 2), rng.uniform(-0.5, 0.5), H, W)
-             for _ in range(3)]
     reference = reference_bracket(still.codes, still.code_max)
-    warps[reference] = np.eye(3)
-    codes = render([view(crop, w) for w in warps], exposures, seed=seed)
+    warps, views = moving_views(crop, reference, 3, H, W, seed)
+    codes = render(views, exposures, seed=seed)
     return ExposureStack.from_arrays(codes, exposures), warps, reference
 
 
@@ -85,23 +87,27 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     aligned = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
     unaligned = radiance_error(merge_stack(moving, MergeOptions(align="off", deghost="off"))
                                .radiance, truth, inner)
-    # The issue's median bound: 1.5x the still stack's (measured 1.36x with the default
-    # inverse-variance merge, 1.23x with the log merge). Its p99 bound of 2x is NOT met:
-    # with the log merge 2.26x, the same with the exact transforms and with spline
-    # interpolation of order 3 or 5 (a resampled aliased image differs from the still one
-    # at sharp edges whatever the interpolator); with the inverse-variance merge 5.3x
-    # (0.217 against 0.041: the still stack's p99 fell from 0.054, the warped one's rose
-    # from 0.121, with deghosting on or off): the noise-optimal weights lean on the
-    # longest unsaturated bracket, where a warp's edge errors are not averaged away.
-    # Bounds here so that a regression shows: 2.5x (log) and 6x (default).
+    # The issue's bounds: median 1.5x and p99 2x the still stack's. A warped bracket is
+    # off at sharp edges by a fraction of the edge's step (the scene is sampled without a
+    # band-limiting filter: warped and warped back in floating point by a cubic spline,
+    # a bracket's ideal radiance is 41-57 % off at its p99), which the noise model does
+    # not know; the merge lowers each warped bracket's weight there by var_noise /
+    # (var_noise + var_resample), var_resample measured against the unwarped reference
+    # (hdrio.align.resampling). Measured, seeds 0 / 1 / 2: default (inverse-variance)
+    # median 1.35x / 1.12x / 1.05x, p99 2.30x / 2.06x / 1.97x (5.2x / 4.9x / 4.8x
+    # without); log merge p99 1.66x / 1.56x / 1.42x. The default's p99 bound of 2x is met
+    # on seed 2 only: weights from the true per-pixel error would give 1.83x / 1.72x, so
+    # what is left is the estimate's (measured against the reference, here the shortest
+    # and noisiest bracket). Bounds here with about 10 % margin: 2.5x (default), 1.85x
+    # (log).
     # Without alignment the same stack is 6x and 10x off.
     assert aligned["median"] <= 1.5 * base["median"], (aligned, base)
-    assert aligned["p99"] <= 6 * base["p99"], (aligned, base)
+    assert aligned["p99"] <= 2.5 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
     log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
-    assert log_aligned["p99"] <= 2.5 * log_base["p99"], (log_aligned, log_base)
+    assert log_aligned["p99"] <= 1.85 * log_base["p99"], (log_aligned, log_base)
     assert unaligned["median"] > 3 * base["median"]
 
 
@@ -389,6 +395,102 @@ def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
     assert np.allclose(radiance, 100.0)  # the shorter bracket's alone
     remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
     assert np.allclose(radiance, (100.0 + 250 / 4.0) / 2)  # Z_max alone: both count
+
+
+def test_resampling_weights_in_bands_of_rows_match_one_band(truth_scene, monkeypatch):
+    """The resampling weights are computed in bands of rows with a halo (the 5x5 window,
+    the Laplacian): bands of 8 rows give the merge of a single band."""
+    import hdrio.align.resampling as resampling
+
+    moving, _, _ = _moving(truth_scene, 0)
+    whole = merge_stack(moving, AUTO).radiance
+    monkeypatch.setattr(resampling, "BAND_PIXELS", 8 * W)
+    banded = merge_stack(moving, AUTO).radiance
+    assert np.array_equal(whole, banded)
+
+
+def _confidence_by_numpy(codes, reference, estimates, noise, allowed, limits, scale):
+    """:func:`hdrio.align.resampling.resampling_confidence`'s formula, spelt out with
+    ``scipy.ndimage`` (the 5x5 sums as a uniform filter, edges repeated)."""
+    import scipy.ndimage
+
+    from hdrio.align.resampling import COVERED, FULL, SIGNIFICANCE, WINDOW
+
+    factor = np.ones(codes.shape[:2])
+    for c in range(codes.shape[-1]):
+        z, zr = codes[..., c].astype(np.int64), reference[..., c].astype(np.int64)
+        a = allowed[0, c][z] + allowed[1, c][zr]
+        ok = np.isfinite(a) & (z < limits[c]) & (zr < limits[c])
+        a = np.where(ok, a * scale, 0.0)
+        e = np.where(ok, (estimates[0, c][z] - estimates[1, c][zr]) ** 2 - a, 0.0)
+        e, a, b = (scipy.ndimage.uniform_filter(v, WINDOW, mode="nearest") * WINDOW ** 2
+                   for v in (e, a, ok.astype(float)))
+        x = np.pad(estimates[0, c][z], 1, mode="edge")
+        h = x[1:-1, 1:-1] - 0.25 * (x[:-2, 1:-1] + x[2:, 1:-1] + x[1:-1, :-2] + x[1:-1, 2:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            measured = np.maximum(0.0, (e - SIGNIFICANCE * np.sqrt(2.0 / b) * a) / b)
+            resample = np.where(b / WINDOW ** 2 > COVERED, measured, h * h)
+            variance = scale * noise[0, c][z]
+            f = variance / (variance + resample)
+        use = (z < limits[c]) & np.isfinite(f)
+        factor = np.where(use, np.minimum(factor, f), factor)
+    return np.where(factor > FULL, 1.0, factor)
+
+
+def test_resampling_confidence_matches_its_formula(truth_scene):
+    """The kernel (runs of cells, running window sums, a band's rows with their halo)
+    gives the formula's factors, computed here with scipy.ndimage, to float rounding
+    (1e-5: sums in a different order); outside the cells asked for, 1."""
+    from hdrio.align.deghost import comparametric_correction, consistency_variance
+    from hdrio.align.registration import linear_tables
+    from hdrio.align.resampling import resampling_confidence
+    from hdrio.merge.noise import fit_noise, observation_variance
+
+    moving, warps, reference = _moving(truth_scene, 1)
+    stack = align_stack(moving, Alignment(reference, np.stack(warps), "euclidean",
+                                          (1.0,) * 3, ()))
+    response = merge_stack(moving, MergeOptions(align="off", deghost="off")).response
+    noise = fit_noise(stack.codes, stack.exposures, response)
+    allowed = consistency_variance(response, stack.exposures, noise)
+    estimates = comparametric_correction(stack.codes, linear_tables(response, stack.exposures),
+                                         allowed, reference)
+    variance = observation_variance(response, stack.exposures, noise)
+    j = 0 if reference else 1
+    pair = [j, reference]
+    limits = np.full(3, stack.code_max - 5)
+    args = (stack.codes[j], stack.codes[reference], estimates[pair], variance[pair],
+            allowed[pair], limits, 1.3)
+    expected = _confidence_by_numpy(*args)
+    assert (expected < 0.5).mean() > 0.01  # the test has something to find
+    assert np.allclose(resampling_confidence(*args), expected, rtol=0, atol=1e-5)
+    top, rows = 37, 64  # a band: rows 37 .. 100, its neighbours read
+    cells = np.zeros((rows // 8, W // 8), bool)
+    cells[::3, ::2] = True
+    band = resampling_confidence(*args, cells=cells, offset=top, rows=rows)
+    inside = np.kron(cells, np.ones((8, 8), bool))
+    assert np.allclose(band[inside], expected[top:top + rows][inside], rtol=0, atol=1e-5)
+    assert np.all(band[~inside] == 1.0)
+
+
+def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch):
+    """Computed only in cells near a warped bracket's edges where it carries weight
+    (EDGE, SHARE), the resampling weights give the merge of every cell computed, within
+    1 % of its p99 and 0.5 % of its median error against the truth (measured, seeds 0-3:
+    p99 0.09 / 0.38 / 0.42 / 0.77 % higher, median 0.12-0.23 %)."""
+    import hdrio.align.resampling as resampling
+    from hdrio.align import shares
+
+    _, truth, _, still = truth_scene
+    inner = _inner(still)
+    for seed in (0, 2):
+        moving, _, _ = _moving(truth_scene, seed)
+        fast = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
+        with monkeypatch.context() as patch:
+            patch.setattr(resampling, "EDGE", 0.0)
+            patch.setattr(shares, "SHARE", 0.0)
+            every = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
+        assert abs(fast["p99"] / every["p99"] - 1) < 0.01, (seed, fast, every)
+        assert abs(fast["median"] / every["median"] - 1) < 0.005, (seed, fast, every)
 
 
 def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):

@@ -9,7 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hdrio.align import ALIGN_MODES, DEGHOST_MODES
-from hdrio.align.deghost import CELL, Deghosting, consistency_variance, deghost
+from hdrio.align.deghost import (
+    CELL,
+    Deghosting,
+    comparametric_correction,
+    consistency_variance,
+    deghost,
+)
 from hdrio.align.pyramid import base_factor
 from hdrio.align.quick import looks_still, usable_masks
 from hdrio.align.registration import (
@@ -20,11 +26,12 @@ from hdrio.align.registration import (
     register,
     sharp_edges,
 )
+from hdrio.align.resampling import remerge_resampled
 from hdrio.align.warp import coverage
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.masked import remerge_masked
-from hdrio.merge.noise import NoiseModel
+from hdrio.merge.noise import NoiseModel, fit_noise, observation_variance
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -142,14 +149,34 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
 def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
                  motion: Motion, weights: np.ndarray, domain: str, per_channel: bool,
-                 limits: tuple[int, ...]) -> None:
+                 limits: tuple[int, ...], noise: NoiseModel | None = None) -> None:
     """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
     bracket (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights
     (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain`` and its
-    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`)."""
-    if motion.keep is None:
+    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`).
+
+    When the brackets were warped, every warped bracket's weight is also lowered where
+    its resampling error outweighs its noise (:mod:`hdrio.align.resampling`; ``noise``:
+    the stack's noise model, fitted here when not given)."""
+    if motion.keep is None and not motion.warped:
         return
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     weights)
-    remerge_masked(stack.codes, motion.keep, CELL, terms, estimates, stack.code_max,
-                   per_channel, domain == "log", radiance, limits)
+
+    def remerge(codes, keep, out, first_row=0, rows=None, factors=None, lowered=None):
+        remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
+                       domain == "log", out, limits, first_row=first_row, rows=rows,
+                       factors=factors, lowered=lowered)
+
+    if not motion.warped:
+        remerge(stack.codes, motion.keep, radiance)
+        return
+    if noise is None:
+        noise = fit_noise(stack.codes, stack.exposures, response)
+    reference = motion.alignment.reference
+    allowed = consistency_variance(response, stack.exposures, noise)
+    remerge_resampled(stack.codes, stack.code_max, limits, motion.keep, CELL, reference,
+                      comparametric_correction(stack.codes, linear_tables(
+                          response, stack.exposures), allowed, reference),
+                      observation_variance(response, stack.exposures, noise), allowed,
+                      terms.imag, remerge, radiance)
