@@ -12,6 +12,7 @@ from hdrio.align.lucaskanade import corner_motion
 from hdrio.align.registration import (
     Alignment,
     align_stack,
+    best_exposed_bracket,
     estimate_alignment,
     reference_bracket,
 )
@@ -68,6 +69,7 @@ def test_known_shifts_and_rotations_are_recovered(truth_scene, seed):
     result = merge_stack(moving, AUTO)
     alignment = result.motion.alignment
     assert alignment.reference == reference and result.motion.warped
+    assert "resample" in result.timings  # the re-merge after a warp: alignment's phase
     centre = np.array([(W - 1) / 2, (H - 1) / 2, 1.0])
     for j in range(3):
         if j == reference:
@@ -79,9 +81,10 @@ def test_known_shifts_and_rotations_are_recovered(truth_scene, seed):
         assert shift < 0.1 and abs(angle) < 0.02, (j, shift, angle)
 
 
-def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene, seed):
     _, truth, _, still = truth_scene
-    moving, _, _ = _moving(truth_scene, 0)
+    moving, _, _ = _moving(truth_scene, seed)
     inner = _inner(still)
     base = radiance_error(merge_stack(still, MergeOptions()).radiance, truth, inner)
     aligned = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
@@ -93,22 +96,21 @@ def test_merge_of_a_moving_stack_is_near_the_still_stack(truth_scene):
     # a bracket's ideal radiance is 41-57 % off at its p99), which the noise model does
     # not know; the merge lowers each warped bracket's weight there by var_noise /
     # (var_noise + var_resample), var_resample measured against the unwarped reference
-    # (hdrio.align.resampling). Measured, seeds 0 / 1 / 2: default (inverse-variance)
-    # median 1.35x / 1.12x / 1.05x, p99 2.30x / 2.06x / 1.97x (5.2x / 4.9x / 4.8x
-    # without); log merge p99 1.66x / 1.56x / 1.42x. The default's p99 bound of 2x is met
-    # on seed 2 only: weights from the true per-pixel error would give 1.83x / 1.72x, so
-    # what is left is the estimate's (measured against the reference, here the shortest
-    # and noisiest bracket). Bounds here with about 10 % margin: 2.5x (default), 1.85x
-    # (log).
-    # Without alignment the same stack is 6x and 10x off.
+    # (hdrio.align.resampling), the bracket that carries most of the merge. Measured
+    # (python -m tests.align_truth), seeds 0 / 1 / 2 / 3: default (inverse-variance)
+    # median 0.95x / 0.92x / 1.15x / 1.00x, p99 1.79x / 1.72x / 1.81x / 1.55x (4.2x /
+    # 4.4x / 3.5x / 3.8x without the resampling weights); log merge p99 1.37x / 1.33x /
+    # 1.41x / 1.20x. The issue's bounds hold with 10 % margin at least; the log merge's
+    # here is 1.6x (13 % above its worst).
     assert aligned["median"] <= 1.5 * base["median"], (aligned, base)
-    assert aligned["p99"] <= 2.5 * base["p99"], (aligned, base)
+    assert aligned["p99"] <= 2.0 * base["p99"], (aligned, base)
     log_base = radiance_error(merge_stack(still, MergeOptions(merge="log")).radiance, truth,
                               inner)
     log_aligned = radiance_error(merge_stack(moving, replace(AUTO, merge="log")).radiance,
                                  truth, inner)
-    assert log_aligned["p99"] <= 1.85 * log_base["p99"], (log_aligned, log_base)
-    assert unaligned["median"] > 3 * base["median"]
+    assert log_aligned["p99"] <= 1.6 * log_base["p99"], (log_aligned, log_base)
+    # Without alignment the same stack is several times off (seed 0: 6x the median).
+    assert unaligned["median"] > 3 * base["median"], (unaligned, base)
 
 
 def test_a_still_stack_is_left_alone(truth_scene):
@@ -116,6 +118,7 @@ def test_a_still_stack_is_left_alone(truth_scene):
     auto = merge_stack(still, AUTO)
     off = merge_stack(still, MergeOptions(align="off", deghost="off"))
     assert not auto.motion.warped and auto.skipped.warp
+    assert "resample" not in auto.timings
     assert "alignment warp" in " ".join(auto.skipped.lines(3))
     # The issue: deghosting flags < 0.1 % of a still stack and moves its median error by
     # < 0.1 % (here nothing is flagged, so the merge is the same to the bit).
@@ -196,11 +199,15 @@ def test_homography_model_recovers_a_shift(truth_scene):
             error = alignment.transforms[j] @ np.linalg.inv(warp)
             centre = np.array([(W - 1) / 2, (H - 1) / 2, 1.0])
             moved = error @ centre
-            # Eight parameters where two would do: the centre within 0.1 px, the corners
-            # (where the perspective terms act) within 0.5 px on this 300x400 crop
-            # (measured 0.42 px).
-            assert np.hypot(*(moved[:2] / moved[2] - centre[:2])) < 0.1
-            assert corner_motion(error, H, W) < 0.5
+            # Eight parameters where two would do, the longest bracket 81 % clipped and
+            # registered to the middle one, the reference, on the 19 % left: the centre
+            # within 0.15 px, the corners (where the perspective terms act) within 0.7 px
+            # on this 300x400 crop (measured 0.103 px and 0.56 px for it at this shift,
+            # 0.082-0.097 px and 0.45-0.48 px at (-1.3, 4.7) and (5.5, 0.8); the shortest
+            # bracket 0.003-0.012 px and 0.08-0.11 px; the Euclidean model 0.02 px and
+            # 0.03 px at most).
+            assert np.hypot(*(moved[:2] / moved[2] - centre[:2])) < 0.15
+            assert corner_motion(error, H, W) < 0.7
 
 
 def test_align_stack_leaves_the_callers_stack_alone(truth_scene):
@@ -226,7 +233,7 @@ def test_moving_objects_are_deghosted(truth_scene):
     from tests.align_truth import render, view
 
     crop, truth, exposures, still = truth_scene
-    reference = reference_bracket(still.codes, still.code_max)
+    reference = best_exposed_bracket(still.codes, still.code_max)  # deghosting's
     others = [j for j in range(3) if j != reference]
     level = float(np.median(truth))
     # People-sized blocks, 4x brighter and 4x darker than the scene's median, each in one
@@ -314,6 +321,27 @@ def test_quick_check_tells_still_from_moving(truth_scene):
     assert not looks_still(nudged, linear, 255, reference)[0]
 
 
+def test_quick_check_settles_a_still_seven_bracket_ladder(monkeypatch):
+    """Seven brackets 2 EV apart, still: the merge's reference (the longest well-exposed
+    bracket, here the sixth) and the bracket the still check starts from (the best exposed,
+    the fourth) differ, and the check alone says "still": no full registration runs (from
+    the sixth, the shortest brackets shared too few points with it and it gave up)."""
+    import hdrio.align.stage as stage
+    from benchmarks.speed.scene import bracket_stack, true_response
+
+    stack, _ = bracket_stack(1000, 1500, 7)
+    assert reference_bracket(stack.codes, stack.code_max) == 5
+    assert best_exposed_bracket(stack.codes, stack.code_max) == 3
+
+    def register(*args, **kwargs):
+        raise AssertionError("the still check gave up: full registration ran")
+
+    monkeypatch.setattr(stage, "register", register)
+    _, _, motion = stage.align_step(stack, true_response(), "auto", None)
+    assert not motion.warped and motion.alignment.reference == 5
+    assert motion.alignment.refused == ()
+
+
 def test_auto_leaves_a_still_truth_stack_unwarped(shared_data):
     from benchmarks.truth.config import quick_config
     from benchmarks.truth.curves import load_curve
@@ -398,52 +426,64 @@ def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
 
 
 def test_resampling_weights_in_bands_of_rows_match_one_band(truth_scene, monkeypatch):
-    """The resampling weights are computed in bands of rows with a halo (the 5x5 window,
-    the Laplacian): bands of 8 rows give the merge of a single band."""
+    """The resampling weights are measured and the cells re-merged in bands of cell rows:
+    a band per cell row gives the merge of the default bands, to the bit."""
     import hdrio.align.resampling as resampling
 
     moving, _, _ = _moving(truth_scene, 0)
     whole = merge_stack(moving, AUTO).radiance
-    monkeypatch.setattr(resampling, "BAND_PIXELS", 8 * W)
+    monkeypatch.setattr(resampling, "BANDS", H // 8)
     banded = merge_stack(moving, AUTO).radiance
     assert np.array_equal(whole, banded)
 
 
-def _confidence_by_numpy(codes, reference, estimates, noise, allowed, limits, scale):
-    """:func:`hdrio.align.resampling.resampling_confidence`'s formula, spelt out with
-    ``scipy.ndimage`` (the 5x5 sums as a uniform filter, edges repeated)."""
-    import scipy.ndimage
+def _cell_factors_by_numpy(codes, j, reference, estimates, noise, allowed, limits, scale,
+                           code_max):
+    """:func:`hdrio.align.resampling.cell_factors`' formula for bracket ``j``, spelt out
+    with NumPy on every pixel (:data:`~hdrio.align.resampling.STRIDE` 1): per cell of 8,
+    the excess disagreement with the reference or, where too few pixels have both, the
+    Laplacian's energy; only cells with a code Laplacian above the edge threshold."""
+    from hdrio.align.resampling import COVERED, EDGE, FULL, SIGNIFICANCE
 
-    from hdrio.align.resampling import COVERED, FULL, SIGNIFICANCE, WINDOW
+    rows, cols = H // 8, W // 8  # whole cells (the last row of cells is partial)
 
-    factor = np.ones(codes.shape[:2])
+    def cells(v, reduce=np.sum):  # (H, W) -> per-cell sums
+        return reduce(v[:rows * 8, :cols * 8].reshape(rows, 8, cols, 8), axis=(1, 3))
+
+    factor = np.ones((rows, cols))
+    z_all = np.pad(codes[j].astype(np.int64), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    lap = np.abs(4 * z_all[1:-1, 1:-1] - z_all[:-2, 1:-1] - z_all[2:, 1:-1]
+                 - z_all[1:-1, :-2] - z_all[1:-1, 2:]).max(axis=-1)
+    sharp = cells(lap, np.max) > 4 * EDGE * code_max
     for c in range(codes.shape[-1]):
-        z, zr = codes[..., c].astype(np.int64), reference[..., c].astype(np.int64)
-        a = allowed[0, c][z] + allowed[1, c][zr]
-        ok = np.isfinite(a) & (z < limits[c]) & (zr < limits[c])
+        z, zr = codes[j, ..., c].astype(np.int64), codes[reference, ..., c].astype(np.int64)
+        usable = z < limits[c]
+        a = allowed[j, c][z] + allowed[reference, c][zr]
+        ok = np.isfinite(a) & usable & (zr < limits[c])
         a = np.where(ok, a * scale, 0.0)
-        e = np.where(ok, (estimates[0, c][z] - estimates[1, c][zr]) ** 2 - a, 0.0)
-        e, a, b = (scipy.ndimage.uniform_filter(v, WINDOW, mode="nearest") * WINDOW ** 2
-                   for v in (e, a, ok.astype(float)))
-        x = np.pad(estimates[0, c][z], 1, mode="edge")
+        e = np.where(ok, (estimates[j, c][z] - estimates[reference, c][zr]) ** 2 - a, 0.0)
+        x = np.pad(estimates[j, c][z], 1, mode="edge")
         h = x[1:-1, 1:-1] - 0.25 * (x[:-2, 1:-1] + x[2:, 1:-1] + x[1:-1, :-2] + x[1:-1, 2:])
+        e, a, b, n = cells(e), cells(a), cells(ok.astype(float)), cells(usable.astype(float))
+        energy = cells(np.where(usable, h * h, 0.0))
+        variance = cells(np.where(usable, scale * noise[j, c][z], 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
             measured = np.maximum(0.0, (e - SIGNIFICANCE * np.sqrt(2.0 / b) * a) / b)
-            resample = np.where(b / WINDOW ** 2 > COVERED, measured, h * h)
-            variance = scale * noise[0, c][z]
-            f = variance / (variance + resample)
-        use = (z < limits[c]) & np.isfinite(f)
+            resample = np.where(b > COVERED * 64, measured, energy / n)
+            f = (variance / n) / (variance / n + resample)
+        use = (n > 0) & (resample > 0) & np.isfinite(f)
         factor = np.where(use, np.minimum(factor, f), factor)
+    factor = np.where(sharp, factor, 1.0)
     return np.where(factor > FULL, 1.0, factor)
 
 
-def test_resampling_confidence_matches_its_formula(truth_scene):
-    """The kernel (runs of cells, running window sums, a band's rows with their halo)
-    gives the formula's factors, computed here with scipy.ndimage, to float rounding
-    (1e-5: sums in a different order); outside the cells asked for, 1."""
+def test_cell_factors_match_their_formula(truth_scene):
+    """The kernel gives the formula's factors, computed here with NumPy, to float rounding
+    (1e-5: sums in a different order); outside the cells asked for, and for the reference,
+    1; a band of cell rows gives the same factors as the whole."""
     from hdrio.align.deghost import comparametric_correction, consistency_variance
     from hdrio.align.registration import linear_tables
-    from hdrio.align.resampling import resampling_confidence
+    from hdrio.align.resampling import cell_factors
     from hdrio.merge.noise import fit_noise, observation_variance
 
     moving, warps, reference = _moving(truth_scene, 1)
@@ -455,28 +495,31 @@ def test_resampling_confidence_matches_its_formula(truth_scene):
     estimates = comparametric_correction(stack.codes, linear_tables(response, stack.exposures),
                                          allowed, reference)
     variance = observation_variance(response, stack.exposures, noise)
-    j = 0 if reference else 1
-    pair = [j, reference]
     limits = np.full(3, stack.code_max - 5)
-    args = (stack.codes[j], stack.codes[reference], estimates[pair], variance[pair],
-            allowed[pair], limits, 1.3)
-    expected = _confidence_by_numpy(*args)
-    assert (expected < 0.5).mean() > 0.01  # the test has something to find
-    assert np.allclose(resampling_confidence(*args), expected, rtol=0, atol=1e-5)
-    top, rows = 37, 64  # a band: rows 37 .. 100, its neighbours read
-    cells = np.zeros((rows // 8, W // 8), bool)
-    cells[::3, ::2] = True
-    band = resampling_confidence(*args, cells=cells, offset=top, rows=rows)
-    inside = np.kron(cells, np.ones((8, 8), bool))
-    assert np.allclose(band[inside], expected[top:top + rows][inside], rtol=0, atol=1e-5)
-    assert np.all(band[~inside] == 1.0)
+    scales = np.full(3, 1.3)
+    tables = (stack.codes, reference, estimates, variance, allowed, limits, scales)
+    todo = np.ones((3, H // 8, W // 8), bool)
+    factors = cell_factors(*tables, todo, 8)
+    assert np.all(factors[reference] == 1.0)
+    for j in range(3):
+        if j == reference:
+            continue
+        expected = _cell_factors_by_numpy(stack.codes, j, reference, estimates, variance,
+                                          allowed, limits, 1.3, stack.code_max)
+        assert (expected < 0.7).mean() > 0.01  # the test has something to find
+        assert np.allclose(factors[j, :H // 8], expected, rtol=0, atol=1e-5)
+    todo[:, ::3, ::2] = False
+    band = cell_factors(*tables, todo[:, 5:13], 8, first=5)
+    assert np.array_equal(band[todo[:, 5:13]], factors[:, 5:13][todo[:, 5:13]])
+    assert np.all(band[~todo[:, 5:13]] == 1.0)
 
 
 def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch):
-    """Computed only in cells near a warped bracket's edges where it carries weight
-    (EDGE, SHARE), the resampling weights give the merge of every cell computed, within
-    1 % of its p99 and 0.5 % of its median error against the truth (measured, seeds 0-3:
-    p99 0.09 / 0.38 / 0.42 / 0.77 % higher, median 0.12-0.23 %)."""
+    """Measured only in cells where a warped bracket has an edge and carries weight
+    (SPREAD, EDGE, SHARE), the resampling weights give the merge of every cell measured,
+    within 1 % of its p99 and 0.5 % of its median error against the truth (measured,
+    seeds 0-3: p99 0.24-0.66 % higher, median 0.00-0.17 % lower; with EDGE at 8 codes
+    instead of 4, p99 2.0-2.2 % higher, which this bound catches)."""
     import hdrio.align.resampling as resampling
     from hdrio.align import shares
 
@@ -487,6 +530,7 @@ def test_resampling_weights_only_where_they_can_matter(truth_scene, monkeypatch)
         fast = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
         with monkeypatch.context() as patch:
             patch.setattr(resampling, "EDGE", 0.0)
+            patch.setattr(resampling, "SPREAD", 0.0)
             patch.setattr(shares, "SHARE", 0.0)
             every = radiance_error(merge_stack(moving, AUTO).radiance, truth, inner)
         assert abs(fast["p99"] / every["p99"] - 1) < 0.01, (seed, fast, every)

@@ -142,8 +142,8 @@ def test_memorial_registration_border_is_not_merged(shared_data):
 
 
 def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
-    """Hand-held: the longest bracket is shifted by (7, 5) px and a block of it is spoilt
-    and masked in its own frame. With --align the mask must be warped with the bracket:
+    """Hand-held: the middle bracket is shifted by (7, 5) px and a block of it is spoilt
+    and masked in its own frame (the longest is the reference: it carries the merge). With --align the mask must be warped with the bracket:
     the block, seen at its place on the reference, merges as the clean stack with the
     same masks does. (Left where it was drawn, the mask lets the garbage in.)"""
     from hdrio.synthetic import demo_scene, render_brackets
@@ -151,7 +151,7 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     times = (1 / 16, 1 / 4, 1.0)
     scene = demo_scene(160, 224, seed=3) * 2.0
     codes = render_brackets(scene, times)
-    codes[2] = np.roll(codes[2], (5, 7), axis=(0, 1))  # the camera moved for the last
+    codes[1] = np.roll(codes[1], (5, 7), axis=(0, 1))  # the camera moved for the middle
     names = ("b_1_16.png", "b_1_4.png", "b_1_1.png")  # exposures from the names
 
     def write(folder: Path, stack: np.ndarray) -> list[Path]:
@@ -168,7 +168,7 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     masks = []
     for j, name in enumerate(names):
         values = np.full(codes.shape[1:3], 255, np.uint8)
-        if j == 2:
+        if j == 1:
             values[own] = 0
         masks.append(tmp_path / "masks" / name)
         _write_grey(masks[-1], values)
@@ -176,10 +176,11 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     # The same masks on the clean stack: what the merge is without that bracket there.
     clean = merge_paths(write(tmp_path / "clean", codes), options=aligned).radiance
     spoilt = codes.copy()
-    spoilt[2][own] = (0, 0, 255)
+    spoilt[1][own] = (40, 200, 90)  # codes the merge would take
     result = merge_paths(write(tmp_path / "spoilt", spoilt), options=aligned)
     centre = np.array([110.0, 72.0, 1.0])  # the block's centre on the reference (x, y)
-    moved = result.motion.alignment.transforms[2] @ centre - centre
+    assert result.motion.alignment.reference == 2
+    moved = result.motion.alignment.transforms[1] @ centre - centre
     # What the roll did (x, y), within the registration's error on this small stack
     # (its garbage block in, the wrapped border: measured 0.16 px).
     assert np.allclose(moved[:2], (7, 5), atol=0.5), moved
@@ -187,7 +188,12 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     ratio = result.radiance[on_reference] / clean[on_reference]
     error = np.abs(ratio - 1)
     # The garbage is out: the block merges as the clean stack with the same masks, up to
-    # the registration's own difference (the garbage is in what it measures). Measured:
-    # p90 0.2 %, max 5.8 %; with the mask left where it was drawn, p90 16 %, max 142 %.
-    assert np.percentile(error, 90) < 0.02 and error.max() < 0.15, \
-        np.percentile(error, [50, 90, 100])
+    # the registration's own difference (the garbage is in what it measures, and the
+    # shortest bracket is registered through the middle one: 0.1 px off here, which moves
+    # its resampled edges). Measured: p90 1.7 %, p99 3.8 %, max 40 % (two pixels above
+    # 5 %). With the longest bracket moved and spoilt instead (when it was not the
+    # reference): p90 0.2 %, max 5.8 %, and with the mask left where it was drawn, p90
+    # 16 %, max 142 %.
+    assert np.percentile(error, 90) < 0.03 and np.percentile(error, 99) < 0.08, \
+        np.percentile(error, [50, 90, 99, 100])
+    assert error.max() < 0.6

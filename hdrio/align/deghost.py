@@ -390,9 +390,12 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         ``(P, C, levels)``: the variance of each estimate (relative radiance squared);
         ``inf`` where a code says nothing (clipped, black).
     reference
-        The bracket the others are tested against (never dropped).
+        The bracket the others are tested against (never dropped for motion):
+        :func:`hdrio.align.registration.best_exposed_bracket`. It need not be the bracket
+        the others were aligned to; if it was warped, its own uncovered cells still go.
     coverage
-        ``(P, rows, cols)`` cells each warped bracket covers (1) or not (0), or ``None``.
+        ``(P, rows, cols)`` cells each warped bracket covers (1) or not (0; 1 for the
+        bracket the others were aligned to), or ``None``.
     resampled
         Whether the brackets were warped (then each is tested against the reference's
         3x3 range, not its pixel).
@@ -456,7 +459,6 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     if not todo.any():  # nothing disagrees anywhere (a still stack): no fine test
         if coverage is not None:
             keep *= coverage
-            keep[reference] = 1.0
         return Deghosting(keep, cell, reference, 0.0)
     mean, counts, takeovers = test(cell, STRIDE, np.ascontiguousarray(todo))
     judged = counts >= MIN_SAMPLES
@@ -479,7 +481,6 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         moved |= drop > 0
     if coverage is not None:
         keep *= coverage
-        keep[reference] = 1.0
     fraction = float(np.count_nonzero(moved)) / moved.size
     return Deghosting(keep, cell, reference, fraction)
 

@@ -119,25 +119,61 @@ class Alignment:
         return lines
 
 
-def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
-                      masks: list[np.ndarray] | None = None) -> int:
-    """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
-    channel well exposed (:data:`hdrio.skips.WELL_EXPOSED`, on a grid of about
-    ``samples`` pixels, or ``masks`` of them already made); the one nearest the middle on
-    a tie."""
-    count, height, width, _ = codes.shape
+def _well_exposed_grids(codes: np.ndarray, code_max: int, samples: int,
+                        masks: list[np.ndarray] | None):
+    """Each bracket's well-exposed pixels (every channel within
+    :data:`hdrio.skips.WELL_EXPOSED`) on a grid of about ``samples`` pixels, or ``masks``
+    of them already made, as a list of bool arrays."""
+    if masks is not None:
+        return masks
+    height, width = codes.shape[1:3]
     step = max(1, int(math.sqrt(height * width / samples)))
     low, high = well_exposed_codes(code_max)
-    middle = (count - 1) / 2.0
-    scores = []
-    for j in range(count):
-        if masks is not None:
-            good = masks[j]
-        else:
-            grid = codes[j, step // 2::step, step // 2::step]
-            good = np.all((grid >= low) & (grid <= high), axis=-1)
-        scores.append((int(np.count_nonzero(good)), -abs(j - middle)))
-    return max(range(count), key=lambda j: scores[j])
+    return [np.all((grid >= low) & (grid <= high), axis=-1)
+            for grid in (codes[j, step // 2::step, step // 2::step]
+                         for j in range(codes.shape[0]))]
+
+
+def _nearest_the_middle(scores: list[int]) -> int:
+    """The bracket of the highest score; the one nearest the middle on a tie."""
+    middle = (len(scores) - 1) / 2.0
+    return max(range(len(scores)), key=lambda j: (scores[j], -abs(j - middle)))
+
+
+def best_exposed_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
+                         masks: list[np.ndarray] | None = None) -> int:
+    """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
+    channel well exposed, on a grid of about ``samples`` pixels (or ``masks`` of them
+    already made); the one nearest the middle on a tie. Deghosting tests every bracket
+    against it (:mod:`hdrio.align.deghost`): it sees the most of the scene."""
+    return _nearest_the_middle([int(np.count_nonzero(good)) for good in
+                                _well_exposed_grids(codes, code_max, samples, masks)])
+
+
+def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
+                      masks: list[np.ndarray] | None = None) -> int:
+    """The bracket the others are aligned to: the one that carries most of the merge, the
+    *longest* well-exposed bracket at the most pixels (grid and ties as
+    :func:`best_exposed_bracket`).
+
+    The noise-optimal merge leans on the longest bracket not clipped at each pixel (the
+    least noise there), so this is the bracket whose observations weigh most. Every other
+    bracket is resampled onto it, and a resampled observation is off at sharp edges by a
+    fraction of the edge (:mod:`hdrio.align.resampling`): the less of the merge's weight
+    is resampled, the less of that error reaches it. On the truth stack (``python -m
+    tests.align_truth``: GoldenGate, three brackets 2 EV apart) the best-exposed bracket
+    is the shortest (well exposed at 97 % of the pixels, the middle one at 62 %); aligned
+    to it, the merge's p99 error was 2.30x / 2.07x / 1.97x / 1.97x the still stack's
+    (seeds 0-3), aligned to the middle one, which this rule chooses, 1.74x / 1.65x /
+    1.77x / 1.51x."""
+    scores = [0] * codes.shape[0]
+    longer = None  # pixels some longer bracket is well exposed at
+    grids = _well_exposed_grids(codes, code_max, samples, masks)
+    for j in reversed(range(len(grids))):
+        good = grids[j]
+        scores[j] = int(np.count_nonzero(good if longer is None else good & ~longer))
+        longer = good.copy() if longer is None else longer | good
+    return _nearest_the_middle(scores)
 
 
 def _pyramid(base: BaseImage, levels: int) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -5,11 +5,18 @@ weights only where it can)."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+from hdrio.parallel import on_threads
 
 SHARE = 0.02
 """A warped bracket's resampling weights are computed only in cells where it can carry
 this share of the merge's weight (at its largest over the cell's codes, the other
 brackets' at their smallest): elsewhere lowering it moves the merge by less."""
+
+
+STRIDE = 2
+"""Pixels: a cell's range of codes is taken on every second pixel each way."""
 
 
 def range_tables(weights: np.ndarray, limits) -> tuple[np.ndarray, np.ndarray, int]:
@@ -35,26 +42,72 @@ def range_tables(weights: np.ndarray, limits) -> tuple[np.ndarray, np.ndarray, i
     return most, least, shift
 
 
-def weighty_cells(low: np.ndarray, high: np.ndarray, kept: np.ndarray, tables,
-                  limits, share: float = SHARE) -> np.ndarray:
-    """``(P, rows, cols)`` bool: the cells where a bracket can carry ``share`` of the
-    merge's weight in some channel, from each bracket's codes' range there ``low``,
-    ``high`` ``(P, rows, cols, C)`` and :func:`range_tables`: its largest weight over the
-    range against the others' smallest (0 where a bracket is saturated in some channel,
-    or where ``kept`` ``(P, rows, cols)``, the cells' keep weights at their smallest over
-    the cell and its neighbours, lowers it)."""
+def weighty_cells(codes: np.ndarray, cell: int, first: int, last: int, kept: np.ndarray,
+                  tables, limits, share: float = SHARE, spread: int = 0) -> np.ndarray:
+    """``(P, last - first, cols)`` bool: the cells (of ``cell`` pixels, rows ``first ..
+    last - 1``) where a bracket of ``codes`` ``(P, H, W, C)`` can carry ``share`` of the
+    merge's weight in some channel, from the range of its codes there (on every
+    :data:`STRIDE`-th pixel each way) and :func:`range_tables`: its largest weight over
+    the range against the others' smallest (0 where a bracket is saturated in some
+    channel, or where ``kept`` ``(P, last - first, cols)``, the cells' keep weights at
+    their smallest over the cell and its neighbours, lowers it). With ``spread``, only
+    the cells where the bracket's codes also span more than ``spread`` codes in some
+    channel (a cell with an edge in it)."""
     most, least, shift = tables
-    count, channels = low.shape[0], low.shape[-1]
-    lo, hi = low.astype(np.int64) >> shift, high.astype(np.int64) >> shift
-    saturated = (high >= np.asarray(limits)).any(axis=-1)
-    kept = np.where(saturated, 0.0, kept)
-    largest = np.stack([most[j, c][lo[j, ..., c], hi[j, ..., c]]
-                        for j in range(count) for c in range(channels)]).reshape(
-        (count, channels) + low.shape[1:3])
-    smallest = np.stack([least[j, c][lo[j, ..., c], hi[j, ..., c]] * kept[j]
-                         for j in range(count) for c in range(channels)]).reshape(
-        largest.shape)
-    others = smallest.sum(axis=0) - smallest  # (P, C, rows, cols)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        fraction = largest / (largest + others)
-    return (np.nan_to_num(fraction, nan=0.0) >= share).any(axis=1)
+    count, height, width, channels = codes.shape
+    out = np.zeros((count, last - first, -(-width // cell)), np.bool_)
+    on_threads(_weighty_cells, last - first, codes, cell, first,
+               np.ascontiguousarray(kept, np.float32), most, least, shift,
+               np.ascontiguousarray(limits, np.int64), float(share), int(spread), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _weighty_cells(start, stop, codes, cell, first, kept, most, least, shift, limits, share,
+                   spread, out):  # pragma: no cover - compiled
+    """Cell rows ``start .. stop - 1`` of :func:`weighty_cells`."""
+    count, height, width, channels = codes.shape
+    half = STRIDE // 2
+    low = np.empty((count, channels), np.int64)
+    high = np.empty((count, channels), np.int64)
+    smallest = np.empty((count, channels))
+    for cy in range(start, stop):
+        y0 = (first + cy) * cell
+        y1 = min(height, y0 + cell)
+        ys = y0 + half if y0 + half < y1 else y0
+        for cx in range(out.shape[2]):
+            x0 = cx * cell
+            x1 = min(width, x0 + cell)
+            xs = x0 + half if x0 + half < x1 else x0
+            for j in range(count):
+                for c in range(channels):  # scalar extremes: kept in registers
+                    least_code = most_code = np.int64(codes[j, ys, xs, c])
+                    for y in range(ys, y1, STRIDE):
+                        for x in range(xs, x1, STRIDE):
+                            z = np.int64(codes[j, y, x, c])
+                            least_code = min(least_code, z)
+                            most_code = max(most_code, z)
+                    low[j, c] = least_code
+                    high[j, c] = most_code
+            total = np.zeros(channels)
+            for j in range(count):
+                saturated = False
+                for c in range(channels):
+                    saturated |= high[j, c] >= limits[c]
+                k = 0.0 if saturated else kept[j, cy, cx]
+                for c in range(channels):
+                    smallest[j, c] = least[j, c, low[j, c] >> shift, high[j, c] >> shift] * k
+                    total[c] += smallest[j, c]
+            for j in range(count):
+                if spread > 0:
+                    wide = False
+                    for c in range(channels):
+                        wide |= high[j, c] - low[j, c] > spread
+                    if not wide:
+                        continue
+                for c in range(channels):
+                    largest = most[j, c, low[j, c] >> shift, high[j, c] >> shift]
+                    whole = largest + total[c] - smallest[j, c]
+                    if whole > 0.0 and largest >= share * whole:
+                        out[j, cy, cx] = True
+                        break

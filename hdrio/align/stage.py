@@ -21,6 +21,7 @@ from hdrio.align.quick import looks_still, usable_masks
 from hdrio.align.registration import (
     Alignment,
     align_stack,
+    best_exposed_bracket,
     linear_tables,
     reference_bracket,
     register,
@@ -83,11 +84,14 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:
-        masks = usable_masks(stack.codes, stack.code_max)  # read once for both
-        reference = reference_bracket(stack.codes, stack.code_max, masks=masks)
+        masks = usable_masks(stack.codes, stack.code_max)  # read once for all three
+        # Stillness is checked from the bracket that sees most of the scene: from the
+        # merge's reference (often a long bracket) the shortest ones share too few points.
+        best = best_exposed_bracket(stack.codes, stack.code_max, masks=masks)
         still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
-                                     stack.code_max, reference, masks)
+                                     stack.code_max, best, masks)
         if still:
+            reference = reference_bracket(stack.codes, stack.code_max, masks=masks)
             motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
                                          model, (0.0,) * stack.count,
                                          tuple(sorted(refused.items())))
@@ -116,13 +120,14 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
         return response
     count, height, width, _ = stack.codes.shape
-    reference = (motion.alignment.reference if motion.alignment is not None
-                 else reference_bracket(stack.codes, stack.code_max))
+    # The bracket the others are tested against: the one that sees most of the scene (not
+    # necessarily the one they were aligned to, which carries most of the merge).
+    reference = best_exposed_bracket(stack.codes, stack.code_max)
     cells = None
     if motion.warped:
         cells = np.stack([coverage(motion.alignment.transforms[j], height, width, CELL)
                           for j in range(count)])
-        cells[reference] = 1.0
+        cells[motion.alignment.reference] = 1.0
         motion.uncovered = float(np.mean(cells.min(axis=0) < 1))
     if deghost_mode == "off":
         motion.keep = cells
@@ -163,10 +168,10 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     weights)
 
-    def remerge(codes, keep, out, first_row=0, rows=None, factors=None, lowered=None):
+    def remerge(codes, keep, out, first_row=0, rows=None, factors=None):
         remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
                        domain == "log", out, limits, first_row=first_row, rows=rows,
-                       factors=factors, lowered=lowered)
+                       factors=factors)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, radiance)

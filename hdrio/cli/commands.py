@@ -186,9 +186,12 @@ def motion_lines(result: MergeResult) -> list[str]:
     if motion.alignment is not None:
         files = tuple(Path(name).name for name in result.stack.files)
         said = "warped" if motion.warped else "not warped"
+        resample = result.timings.get("resample", 0.0)
         lines.append(f"align:     {motion.alignment.model} to "
                      f"{files[motion.alignment.reference]}, {said}, "
-                     f"{result.timings.get('align', 0):.2f} s"
+                     f"{result.timings.get('align', 0) + resample:.2f} s"
+                     + (f" (re-merging with resampling weights {resample:.2f} s)"
+                        if resample else "")
                      + (f"; {100 * motion.uncovered:.1f} % of pixels not covered by every "
                         "bracket" if motion.uncovered else ""))
         lines += [f"           {line}" for line in motion.alignment.describe(files)]

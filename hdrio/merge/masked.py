@@ -44,38 +44,27 @@ def _corner(position, size):  # pragma: no cover - compiled
 
 @njit(parallel=True, cache=True, nogil=True)
 def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
-             log_domain, out, first, factors, lowered):  # pragma: no cover - compiled
+             log_domain, out, first, factors):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
     height = min(height, first + touched.shape[0] * cell)  # the band's rows
     rows, cols = keep.shape[1], keep.shape[2]
-    scaled = lowered.shape[1] > 0
+    scaled = factors.shape[1] > 0
     for cy in prange(touched.shape[0]):
         m = np.empty(count)
         values = np.empty(channels)
         for cx in range(cols):
-            whole = touched[cy, cx]  # else only the pixels a factor below 1 lowers
-            some = False
-            if scaled:
-                for j in range(count):
-                    some |= lowered[j, cy, cx]
-            if not whole and not some:
+            if not touched[cy, cx]:
                 continue
             for y in range(first + cy * cell, min(height, first + (cy + 1) * cell)):
                 y0, y1, wy = _corner((y + 0.5) / cell, rows)
                 for x in range(cx * cell, min(width, (cx + 1) * cell)):
-                    if not whole:
-                        low = False
-                        for j in range(count):
-                            low |= lowered[j, cy, cx] and factors[j, y - first, x] < 1.0
-                        if not low:
-                            continue
                     x0, x1, wx = _corner((x + 0.5) / cell, cols)
                     for j in range(count):
                         k = keep[j]
                         m[j] = ((1.0 - wy) * ((1.0 - wx) * k[y0, x0] + wx * k[y0, x1])
                                 + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
-                        if scaled and lowered[j, cy, cx]:
-                            m[j] *= factors[j, y - first, x]
+                        if scaled:
+                            m[j] *= factors[j, cy, cx]
                     only_dropped = False
                     for c in range(channels):
                         numerator = 0.0
@@ -115,8 +104,7 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
                    log_domain: bool, radiance: np.ndarray,
                    limits: tuple[int, ...] | np.ndarray | None = None, *,
                    first_row: int = 0, rows: int | None = None,
-                   factors: np.ndarray | None = None, lowered: np.ndarray | None = None
-                   ) -> int:
+                   factors: np.ndarray | None = None) -> int:
     """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
     weight is below 1; returns how many cells were re-merged.
 
@@ -137,12 +125,11 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         given): a code at or above it resets the sums as a saturated one, so that keep
         weights of 1 give the kernel's merge (the ``auto`` policy's limits are below
         ``Z_max`` by the noise margin and the shoulders).
-    first_row, rows, factors, lowered
+    first_row, rows, factors
         A band: only rows ``first_row .. first_row + rows - 1`` (``first_row`` a multiple
-        of ``cell``; all rows by default) are re-merged. ``factors`` ``(P, rows, W)`` float32
-        multiply the keep weights per pixel (:mod:`hdrio.align.resampling`), read only in
-        the band's cells where ``lowered`` ``(P, cell rows, cols)`` is true; there the
-        pixels a factor below 1 lowers are re-merged too.
+        of ``cell``; all rows by default) are re-merged. ``factors`` ``(P, cell rows of
+        the band, cols)`` multiply the keep weights per cell, not interpolated
+        (:mod:`hdrio.align.resampling`); the cells where one is below 1 are re-merged too.
     """
     rows = codes.shape[1] - first_row if rows is None else rows
     start, stop = first_row // cell, -(-(first_row + rows) // cell)
@@ -152,12 +139,11 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     touched = low if cell == 1 or not low.any() else scipy.ndimage.binary_dilation(
         low, np.ones((3, 3), bool))
     touched = touched[start - above:stop - above]
-    if lowered is None:
-        if not touched.any():
-            return 0
+    if factors is None:
         factors = np.ones((codes.shape[0], 0, 0), np.float32)
-        lowered = np.zeros((codes.shape[0], 0, 0), bool)
-    elif not touched.any() and not lowered.any():
+    else:
+        touched = touched | (factors < 1.0).any(axis=0)
+    if not touched.any():
         return 0
     channels = codes.shape[-1]
     limits = np.full(channels, code_max, np.int64) if limits is None else \
@@ -168,6 +154,5 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     _remerge(codes, np.ascontiguousarray(
         keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
              terms, np.ascontiguousarray(estimates, np.float64), limits, per_channel,
-             log_domain, radiance, first_row, np.ascontiguousarray(factors, np.float32),
-             np.ascontiguousarray(lowered, bool))
+             log_domain, radiance, first_row, np.ascontiguousarray(factors, np.float32))
     return int(np.count_nonzero(touched))
