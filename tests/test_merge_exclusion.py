@@ -143,9 +143,10 @@ def test_memorial_registration_border_is_not_merged(shared_data):
 
 def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     """Hand-held: the middle bracket is shifted by (7, 5) px and a block of it is spoilt
-    and masked in its own frame (the longest is the reference: it carries the merge). With --align the mask must be warped with the bracket:
-    the block, seen at its place on the reference, merges as the clean stack with the
-    same masks does. (Left where it was drawn, the mask lets the garbage in.)"""
+    and masked in its own frame (the longest is the reference: it carries the merge).
+    With --align the mask must be warped with the bracket: the block, seen at its place
+    on the reference, merges as the clean stack with the same masks does. (Left where it
+    was drawn, the mask lets the garbage in.)"""
     from hdrio.synthetic import demo_scene, render_brackets
 
     times = (1 / 16, 1 / 4, 1.0)

@@ -52,12 +52,16 @@ class Motion:
         Keep weights and the fraction deghosted (``None`` with ``--deghost off``).
     uncovered
         Fraction of pixels some warped bracket does not cover (dropped there).
+    best_exposed
+        :func:`hdrio.align.registration.best_exposed_bracket`, when the still check has
+        found it (the deghosting test's reference: not looked for twice).
     """
 
     alignment: Alignment | None = None
     warped: bool = False
     deghosting: Deghosting | None = None
     uncovered: float = 0.0
+    best_exposed: int | None = None
     keep: np.ndarray | None = None
     """``(P, rows, cols)`` keep weights on cells of :data:`hdrio.align.deghost.CELL`
     pixels, or ``None`` when no bracket is dropped anywhere."""
@@ -88,6 +92,7 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
         # Stillness is checked from the bracket that sees most of the scene: from the
         # merge's reference (often a long bracket) the shortest ones share too few points.
         best = best_exposed_bracket(stack.codes, stack.code_max, masks=masks)
+        motion.best_exposed = best
         still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
                                      stack.code_max, best, masks)
         if still:
@@ -122,7 +127,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     count, height, width, _ = stack.codes.shape
     # The bracket the others are tested against: the one that sees most of the scene (not
     # necessarily the one they were aligned to, which carries most of the merge).
-    reference = best_exposed_bracket(stack.codes, stack.code_max)
+    reference = (motion.best_exposed if motion.best_exposed is not None
+                 else best_exposed_bracket(stack.codes, stack.code_max))
     cells = None
     if motion.warped:
         cells = np.stack([coverage(motion.alignment.transforms[j], height, width, CELL)
