@@ -27,11 +27,12 @@ from Python."""
 
 STAGES: dict[str, tuple[str, ...]] = {
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
-    "motion": ("hdrio.align.quick:_read", "hdrio.align.pyramid:_base_rows",
-               "hdrio.align.deghost:_consistency"),
+    "motion": ("hdrio.align.quick:_read", "hdrio.align.deghost:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }
-"""The kernels whose cache stands for each stage's (they compile together)."""
+"""The kernels whose cache stands for each stage's (they compile together). Motion's are
+the still check's and deghosting's, what ``auto`` runs on most stacks; registering a stack
+that moved compiles more (the base image, Lucas-Kanade) on first use, unannounced."""
 
 
 def _dispatcher(name: str):
