@@ -28,11 +28,10 @@ its baseline:
     masked re-merge); deghosting's time is its own phase (its test, and the noise fit,
     which the merge would otherwise do) plus what ``--deghost auto`` adds to the fused
     re-merge (not below 0: a difference of two noisy timings), over the merge's own
-    time: the merge of the still stack with both
-    ``off``, as for the static rows (in the moving runs the merge reads pages of a staged
-    stack that the warp has just mapped, so it runs faster: that ratio is shown too, and
-    the deghost phase and the re-merge together over it, as this benchmark printed them
-    before).
+    time: the merge of the still stack with both ``off``, as for the static rows (in the
+    moving runs the merge reads pages of a staged stack that the warp has just mapped,
+    so it runs faster: that ratio is shown too, and the deghost phase and the re-merge
+    together over it, as this benchmark printed them before).
 
 Prints a table and writes ``benchmarks/results/motion.json``.
 """
@@ -160,47 +159,40 @@ def main(argv: list[str] | None = None) -> int:
     added_cpu = moving["deghost cpu"] + max(0.0, moving["resample cpu"]
                                             - aligned["resample cpu"])
     moved_count = max(1, moving["moved"])
-    rows = {
+    measures = [  # (name, value, target or None)
         # The whole call's extra time: the noise model that deghosting fits is the one the
         # (noise-aware) merge uses, so the phases alone would over-count it.
-        "static auto: extra time / merge (off), wall":
-            (static["total"] - plain["total"]) / plain["merge"],
-        "static auto: extra CPU / merge CPU (off)":
-            (sum(static[f"{p} cpu"] for p in phases) - sum(plain[f"{p} cpu"] for p in phases))
-            / plain["merge cpu"],
-        "static auto: still check CPU / merge CPU (off)": static["align cpu"] / plain["merge cpu"],
-        "static auto: deghosting less noise fit, CPU / merge CPU (off)":
-            (static["deghost cpu"] - noise) / plain["merge cpu"],
-        "moving: alignment per moved bracket (s), wall":
-            (aligned["align"] + aligned["resample"]) / moved_count,
-        "moving: alignment per moved bracket (CPU s)":
-            (aligned["align cpu"] + aligned["resample cpu"]) / moved_count,
-        "moving: ... of which the resampling weights' re-merge (s), wall":
-            aligned["resample"] / moved_count,
-        "moving: deghosting / merge (off), wall": added / plain["merge"],
-        "moving: deghosting / merge (off), CPU": added_cpu / plain["merge cpu"],
-        "moving: deghosting / merge (deghost off, same stack), wall": added / aligned["merge"],
-        "moving: deghost phase and re-merge together / merge, wall":
-            (moving["deghost"] + moving["resample"]) / moving["merge"],
-    }
-    targets = {"static auto: extra time / merge (off), wall": 0.10,
-               "static auto: extra CPU / merge CPU (off)": 0.10,
-               "static auto: still check CPU / merge CPU (off)": None,
-               "static auto: deghosting less noise fit, CPU / merge CPU (off)": None,
-               "moving: alignment per moved bracket (s), wall": 0.5,
-               "moving: alignment per moved bracket (CPU s)": 1.0,  # 0.5 s on 2 cores
-               "moving: ... of which the resampling weights' re-merge (s), wall": None,
-               "moving: deghosting / merge (off), wall": 1.0,
-               "moving: deghosting / merge (off), CPU": 1.0,
-               "moving: deghosting / merge (deghost off, same stack), wall": None,
-               "moving: deghost phase and re-merge together / merge, wall": None}
+        ("static auto: extra time / merge (off), wall",
+         (static["total"] - plain["total"]) / plain["merge"], 0.10),
+        ("static auto: extra CPU / merge CPU (off)",
+         (sum(static[f"{p} cpu"] for p in phases) - sum(plain[f"{p} cpu"] for p in phases))
+         / plain["merge cpu"], 0.10),
+        ("static auto: still check CPU / merge CPU (off)",
+         static["align cpu"] / plain["merge cpu"], None),
+        ("static auto: deghosting less noise fit, CPU / merge CPU (off)",
+         (static["deghost cpu"] - noise) / plain["merge cpu"], None),
+        ("moving: alignment per moved bracket (s), wall",
+         (aligned["align"] + aligned["resample"]) / moved_count, 0.5),
+        ("moving: alignment per moved bracket (CPU s)",  # 0.5 s on 2 cores
+         (aligned["align cpu"] + aligned["resample cpu"]) / moved_count, 1.0),
+        ("moving: ... of which the resampling weights' re-merge (s), wall",
+         aligned["resample"] / moved_count, None),
+        ("moving: deghosting / merge (off), wall", added / plain["merge"], 1.0),
+        ("moving: deghosting / merge (off), CPU", added_cpu / plain["merge cpu"], 1.0),
+        ("moving: deghosting / merge (deghost off, same stack), wall",
+         added / aligned["merge"], None),
+        ("moving: deghost phase and re-merge together / merge, wall",
+         (moving["deghost"] + moving["resample"]) / moving["merge"], None),
+    ]
+    rows = {name: value for name, value, _ in measures}
+    targets = {name: target for name, _, target in measures}
     print(f"{args.brackets} brackets of {height}x{width}, {threads()} threads, "
           f"{'staged in a file' if staged else 'in memory'} (HDRIO_MEMORY_BUDGET_MB), "
           f"load average {load[0]:.1f} before, {load[1]:.1f} after")
     print(f"{'measure':66s} {'value':>8s} {'target':>8s}")
-    for name, value in rows.items():
-        target = "" if targets[name] is None else f"{targets[name]:8.2f}"
-        print(f"{name:66s} {value:8.3f} {target:>8s}")
+    for name, value, target in measures:
+        shown = "" if target is None else f"{target:8.2f}"
+        print(f"{name:66s} {value:8.3f} {shown:>8s}")
     print(f"noise fit: {noise:.3f} s CPU")
     for name, timings in (("off", plain), ("static", static), ("aligned", aligned),
                           ("moving", moving)):

@@ -363,8 +363,9 @@ def test_corner_motion_error_is_the_first_order_spread():
 def test_quick_check_settles_a_still_seven_bracket_ladder(monkeypatch):
     """Seven brackets 2 EV apart, still: the merge's reference (the longest well-exposed
     bracket, here the sixth) and the bracket the still check starts from (the best exposed,
-    the fourth) differ, and the check alone says "still": no full registration runs (from
-    the sixth, the shortest brackets shared too few points with it and it gave up)."""
+    the fourth) differ, and the check alone says "still": no full registration runs
+    (started from the sixth, the check gave up at this size and the stack was registered
+    in full)."""
     import hdrio.align.stage as stage
     from benchmarks.speed.scene import bracket_stack, true_response
 

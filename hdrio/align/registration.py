@@ -129,9 +129,8 @@ def _well_exposed_grids(codes: np.ndarray, code_max: int, samples: int,
     height, width = codes.shape[1:3]
     step = max(1, int(math.sqrt(height * width / samples)))
     low, high = well_exposed_codes(code_max)
-    return [np.all((grid >= low) & (grid <= high), axis=-1)
-            for grid in (codes[j, step // 2::step, step // 2::step]
-                         for j in range(codes.shape[0]))]
+    grids = codes[:, step // 2::step, step // 2::step]
+    return [np.all((grid >= low) & (grid <= high), axis=-1) for grid in grids]
 
 
 def _nearest_the_middle(scores: list[int]) -> int:
