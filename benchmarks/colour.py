@@ -20,12 +20,12 @@ import numpy as np
 from benchmarks.truth.scenes import data_folder
 from hdrio.cms import spaces
 from hdrio.cms.calibration import Calibration
-from hdrio.cms.luminance import luminance
 from hdrio.cms.lut import export_response
-from hdrio.imageops import read_image
 from hdrio.io.brackets import read_codes
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files
+from hdrio.io.images import read_image
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files
+from hdrio.radiometry.luminance import luminance
 
 TARGETS = (("ACEScg", "ACEScg"), ("ACES2065-1", "ACES2065-1"),
            ("lin_p3d65_scene", "Display P3"), ("lin_rec2020_scene", "ITU-R BT.2020"),

@@ -4,14 +4,14 @@
 
 Each ``openexr_scenes`` photograph is rendered as 7 brackets 2 EV apart through a camera
 that clips its raw channels, white-balances them and mixes them with its colour matrix
-after the clip (:func:`hdrio.synthetic.render_camera_brackets`, the 5D Mark II's matrix:
+after the clip (:func:`hdrio.tools.synthetic.render_camera_brackets`, the 5D Mark II's matrix:
 ``mixed``), and through two controls with the same noise draws: the same camera without
 the mixing (``unmixed``: both matrices the identity) and the same camera mixing *before*
 it clips each output channel (``mixed-before-clip``: the same matrix, so the same noise
 gain, but nothing to drop except the clipped channel itself). Each stack is merged with
 the true response and the default estimator under every saturation policy, and under
 the *oracle*, which drops exactly the clipped observations (what no policy can beat).
-The hue angle error (:func:`hdrio.synthetic.hue_angle_error`, degrees) is measured on the
+The hue angle error (:func:`hdrio.tools.synthetic.hue_angle_error`, degrees) is measured on the
 mixed camera's clip-transition pixels: some but not all raw channels clipped in some
 bracket, nothing clipped in the shortest. With sensor noise and without (codes' rounding
 only: the policy's bias alone). Prints a table, each camera's ``auto`` p99 over the
@@ -33,10 +33,10 @@ import numpy as np
 
 from benchmarks.truth.scenes import REPO_ROOT, SCENES, builtin_scenes
 from benchmarks.truth.stacks import exposure_ladder
-from hdrio.merge.estimators import MERGE_METHODS
+from hdrio.merge.methods import MERGE_METHODS
 from hdrio.merge.saturation import SATURATION_POLICIES
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_inverse_response, hue_angle_error, render_camera_brackets
+from hdrio.tools.synthetic import gamma_inverse_response, hue_angle_error, render_camera_brackets
 
 VARIANTS = (*SATURATION_POLICIES, "oracle")
 CAMERAS = {"mixed": {}, "mixed-before-clip": {"mix_before_clip": True},

@@ -3,7 +3,7 @@
 ``python -m benchmarks.motion [--size 4000x6000] [--brackets 7] [--repeats 2]``: the speed
 benchmark's demo scene (``benchmarks.speed.scene``), 8-bit, 2 EV apart, with the true
 response given (no solve, so only the steps measured run). Three runs of
-:func:`hdrio.pipeline.merge_stack`, each handed a fresh copy of its stack where hdrio's
+:func:`hdrio.job.run.merge_stack`, each handed a fresh copy of its stack where hdrio's
 reader would put it (staged in a file beyond ``HDRIO_MEMORY_BUDGET_MB``: 7 x 24 MP is)
 and ``owned``, as ``hdrio merge`` hands over the brackets it read (the warp works in
 place), each timed by
@@ -51,10 +51,10 @@ from benchmarks.speed.scene import bracket_stack, true_response
 from hdrio.align.registration import reference_bracket
 from hdrio.align.warp import warp_codes
 from hdrio.io.staging import budget_bytes, codes_buffer, release
-from hdrio.merge.noise import fit_noise
-from hdrio.merge_job import MergeOptions
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.parallel import threads
-from hdrio.pipeline import merge_stack
+from hdrio.radiometry.noise import fit_noise
 from hdrio.stack import ExposureStack
 
 

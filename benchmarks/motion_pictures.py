@@ -17,8 +17,8 @@ import numpy as np
 from benchmarks.truth.scenes import data_folder
 from hdrio.io.brackets import read_brackets
 from hdrio.io.write import write_image
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.tonemap.preview import render_preview
 
 CROPS = {  # (top, left, height, width) in the stack's pixels

@@ -21,9 +21,9 @@ from benchmarks.truth.curves import load_curve
 from benchmarks.truth.methods import exposure_stack
 from benchmarks.truth.scenes import data_folder, read_scene
 from benchmarks.truth.stacks import render_stack
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
-from hdrio.synthetic import radiance_error
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
+from hdrio.tools.synthetic import radiance_error
 
 CURVES = ("dorf0", "dorf100")
 

@@ -1,7 +1,7 @@
 """``python -m benchmarks.tonemap [--width W --height H --repeats N --json PATH]``.
 
 Times hdrio's Reinhard (2002) global and local operators on a procedural HDR scene
-(``hdrio.synthetic.demo_scene``, float32 RGB) at W x H and at a quarter of each side, in
+(``hdrio.tools.synthetic.demo_scene``, float32 RGB) at W x H and at a quarter of each side, in
 one run, against
 
 * the floor: a plain copy of the same image (``numpy.copy``: read and write every byte);
@@ -39,11 +39,11 @@ from benchmarks.truth.harness import environment
 from benchmarks.truth.memory import PeakMemory
 from benchmarks.truth.scenes import REPO_ROOT
 from hdrio.io.write import write_text
-from hdrio.synthetic import demo_scene
 from hdrio.tonemap.reinhard2002 import (
     tonemap_Reinhard2002_global,
     tonemap_Reinhard2002_local,
 )
+from hdrio.tools.synthetic import demo_scene
 
 TARGETS_S = {"hdrio global": 0.3, "hdrio local": 3.0}  # issue #4's acceptance at 24 MP
 _COMPILE_PROBE = """
@@ -52,7 +52,7 @@ start = time.perf_counter()
 import numpy as np
 from hdrio.tonemap.reinhard2002 import tonemap_Reinhard2002_global, tonemap_Reinhard2002_local
 import hdrio.tonemap.reinhard2002_kernels
-from hdrio.cms.luminance import luminance_weights
+from hdrio.radiometry.luminance import luminance_weights
 luminance_weights()  # colour-science's import: not compile time
 imported = time.perf_counter()
 image = np.full((8, 8, 3), 0.5, dtype=np.float32)

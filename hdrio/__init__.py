@@ -14,21 +14,26 @@ warnings.filterwarnings("ignore", message='"Matplotlib" related API features are
 
 from hdrio.lazy import lazy_attributes  # noqa: E402
 
-# Public names and their modules, in dependency order (the layering: the data model, I/O,
-# weighting and response recovery, merging, tone mapping, then the pipeline that chains
-# them). Each is imported on first use, so a command pays only for what it runs.
+# Public names and their modules, in dependency order (the layers, bottom to top:
+# foundations, I/O, radiometry, the stages side by side, the job that chains them;
+# docs/architecture.md). Each is imported on first use, so a command pays only for what
+# it runs.
 _EXPORTS = {
     "ExposureStack": "hdrio.stack",
     "HdrioError": "hdrio.errors", "InputError": "hdrio.errors",
     "ResponseSolveError": "hdrio.errors",
     "read_brackets": "hdrio.io.brackets", "write_exr": "hdrio.io.write",
-    "RESPONSE_METHODS": "hdrio.response", "CameraResponse": "hdrio.response",
-    "response_Debevec1997": "hdrio.response",
-    "MERGE_METHODS": "hdrio.merge.estimators", "WEIGHTING_METHODS": "hdrio.merge.weighting",
-    "merge_brackets": "hdrio.merge.debevec1997",
+    "CameraResponse": "hdrio.radiometry.curve",
+    "NoiseModel": "hdrio.radiometry.noise",
+    "ESTIMATORS": "hdrio.radiometry.estimators",
+    "WEIGHTING_METHODS": "hdrio.radiometry.weighting",
+    "RESPONSE_METHODS": "hdrio.response", "response_Debevec1997": "hdrio.response",
+    "MERGE_METHODS": "hdrio.merge.methods", "merge_brackets": "hdrio.merge.weighted_mean",
     "TONEMAP_METHODS": "hdrio.tonemap",
-    "MergeOptions": "hdrio.merge_job", "MergeResult": "hdrio.merge_job",
-    "merge_files": "hdrio.pipeline", "merge_stack": "hdrio.pipeline",
+    "MergeOptions": "hdrio.job.options", "MergePlan": "hdrio.job.plan",
+    "plan_merge": "hdrio.job.plan", "MergeResult": "hdrio.job.result",
+    "merge_files": "hdrio.job.run", "merge_paths": "hdrio.job.run",
+    "merge_stack": "hdrio.job.run",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS)

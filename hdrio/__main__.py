@@ -1,3 +1,5 @@
+"""``python -m hdrio``: the ``hdrio`` command (:func:`hdrio.cli.main`)."""
+
 import sys
 
 from hdrio.cli import main

@@ -4,7 +4,7 @@ Kernels compile on first use and are cached on disk (``cache=True``); a later pr
 loads them in milliseconds. The first run of a job can spend most of its time compiling,
 so the pipeline announces it: "compiling kernels (first run only)". numba compiles on one
 thread, so a first ``hdrio merge`` or ``hdrio demo`` also starts processes
-(:func:`compile_ahead`, running :mod:`hdrio.precompile`) that compile kernels the job
+(:func:`compile_ahead`, running :mod:`hdrio.tools.precompile`) that compile kernels the job
 needs later (the merge's, the preview's tone mapping, and with four CPUs or more
 alignment's and deghosting's, which on fewer this process compiles itself when it
 reaches them) while this one reads the brackets and solves the response; it waits for
@@ -83,7 +83,7 @@ _finished: set[str] = set()
 
 
 def helper_jobs(cpus: int, stages: list[str]) -> list[tuple[int, list[str]]]:
-    """The compile-ahead processes for ``stages`` (names of :mod:`hdrio.precompile`:
+    """The compile-ahead processes for ``stages`` (names of :mod:`hdrio.tools.precompile`:
     ``motion``, ``merge``, ``preview=OPERATOR``, in the order the job needs them) on
     ``cpus`` CPUs: ``(niceness, stages)`` each. Below :data:`ONE_HELPER_BELOW` CPUs, one
     process of merge and preview (motion compiles in the job itself); else one process a
@@ -100,7 +100,7 @@ def helper_jobs(cpus: int, stages: list[str]) -> list[tuple[int, list[str]]]:
 
 def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool = False
                   ) -> None:
-    """On a first run, start processes (:mod:`hdrio.precompile`) compiling kernels into
+    """On a first run, start processes (:mod:`hdrio.tools.precompile`) compiling kernels into
     the disk cache: the merge kernel of 8-bit RGB brackets when ``merge()`` (asked only
     when a kernel is not cached), with ``motion`` alignment's still check and
     deghosting's test of such brackets, and the ``preview`` operator's (a
@@ -120,7 +120,7 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
     if preview and not _started_or_cached("preview"):
         uncached.append(f"preview={preview}")
     for niceness, names in helper_jobs(cpus, uncached):
-        process = subprocess.Popen([sys.executable, "-m", "hdrio.precompile",
+        process = subprocess.Popen([sys.executable, "-m", "hdrio.tools.precompile",
                                     f"nice={niceness}", *names],
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                    stderr=subprocess.DEVNULL, text=True)

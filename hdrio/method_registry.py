@@ -1,15 +1,21 @@
-"""A case-insensitive method registry with aliases (after colour-science's ``*_METHODS``)."""
+"""A case-insensitive method registry with aliases (after colour-science's ``*_METHODS``).
+
+A foundation: the response solvers, weightings, samplers, merge estimators and
+tone-mapping operators each keep one registry of their methods.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
 from typing import Generic, TypeVar
 
-T = TypeVar("T", bound=Callable)
+T = TypeVar("T")
+U = TypeVar("U")
 
 
 class MethodRegistry(Mapping[str, T], Generic[T]):
-    """Map method names (and aliases) to callables, ignoring case, ``-`` and ``_``.
+    """Map method names (and aliases) to methods (functions, or descriptions of a
+    method), ignoring case, ``-`` and ``_``.
 
     >>> methods = MethodRegistry("weighting", {"Debevec1997": abs},
     ...                          aliases={"triangle": "Debevec1997"})
@@ -52,3 +58,10 @@ class MethodRegistry(Mapping[str, T], Generic[T]):
 
     def __len__(self) -> int:
         return len(self._methods)
+
+    def derive(self, make: Callable[[T], U]) -> MethodRegistry[U]:
+        """A registry of ``make(method)`` for every method, under the same names and
+        aliases (one list of names for two views of the same methods)."""
+        return MethodRegistry(self.kind, {name: make(method)
+                                          for name, method in self._methods.items()},
+                              aliases=self._aliases)

@@ -20,7 +20,7 @@ from benchmarks.truth.curves import load_curve
 from benchmarks.truth.scenes import data_folder, read_scene
 from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE
 from hdrio.align.lucaskanade import rescale
-from hdrio.synthetic import render_brackets
+from hdrio.tools.synthetic import render_brackets
 
 SUPER = 2
 
@@ -91,9 +91,9 @@ def moving_views(crop: np.ndarray, reference: int, count: int, height: int, widt
 
 def main(seeds: list[int]) -> None:
     from hdrio.align.registration import reference_bracket
-    from hdrio.pipeline import MergeOptions, merge_stack
+    from hdrio.job.run import MergeOptions, merge_stack
     from hdrio.stack import ExposureStack
-    from hdrio.synthetic import radiance_error, well_exposed
+    from hdrio.tools.synthetic import radiance_error, well_exposed
 
     height, width, margin = 300, 400, 24  # tests/test_align.py's
     crop = scene_crop("GoldenGate", height, width, 100, 30)

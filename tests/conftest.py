@@ -11,7 +11,7 @@ import pytest
 
 from benchmarks.truth.scenes import data_root  # one place for ../shared/data lookup
 from hdrio.io.write import write_image
-from hdrio.synthetic import render_brackets
+from hdrio.tools.synthetic import render_brackets
 
 # Four brackets two stops apart; the ramp below is well exposed in at least one of them.
 DEFAULT_EXPOSURES = (1 / 16, 1 / 4, 1.0, 4.0)

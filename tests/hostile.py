@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.io.write import write_exr, write_image
-from hdrio.synthetic import render_brackets
+from hdrio.tools.synthetic import render_brackets
 from tests.conftest import DEFAULT_EXPOSURES, ramp_radiance, tutorial_name
 
 SIZE = (24, 32)

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.merge.debevec1997 import estimate_tables
-from hdrio.merge.weighting import weights_table
+from hdrio.radiometry.tables import estimate_tables
+from hdrio.radiometry.weighting import weights_table
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.synthetic import render_brackets
+from hdrio.tools.synthetic import render_brackets
 
 SUN_PEAK = 1e6
 GREY = 1.0  # mid-grey: the unit of relative radiance

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance
+from hdrio.radiometry.luminance import DEFAULT_SPACE, luminance
 from hdrio.tonemap.reinhard2002 import DELTA, _adapting_luminance
 
 

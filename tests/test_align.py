@@ -18,10 +18,10 @@ from hdrio.align.registration import (
 )
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import radiance_error, well_exposed
+from hdrio.tools.synthetic import radiance_error, well_exposed
 
 H, W = 300, 400
 MARGIN = 24  # pixels: the cells a warped bracket does not fully cover (8-px cells + 10 px)
@@ -329,8 +329,13 @@ def test_quick_check_allows_for_a_noisy_pair_of_dark_brackets(monkeypatch):
     full."""
     import hdrio.align.quick as quick
     from hdrio.align.registration import linear_tables
-    from hdrio.demo import DEMO_EXPOSURES
-    from hdrio.synthetic import demo_scene, gamma_inverse_response, gamma_response, render_brackets
+    from hdrio.tools.demo import DEMO_EXPOSURES
+    from hdrio.tools.synthetic import (
+        demo_scene,
+        gamma_inverse_response,
+        gamma_response,
+        render_brackets,
+    )
 
     times = [n / d for n, d in DEMO_EXPOSURES]
     codes = render_brackets(demo_scene(seed=0), times, gamma_response, seed=0)
@@ -366,7 +371,7 @@ def test_quick_check_settles_a_still_seven_bracket_ladder(monkeypatch):
     the fourth) differ, and the check alone says "still": no full registration runs
     (started from the sixth, the check gave up at this size and the stack was registered
     in full)."""
-    import hdrio.align.stage as stage
+    import hdrio.align.motion as stage
     from benchmarks.speed.scene import bracket_stack, true_response
 
     stack, _ = bracket_stack(1000, 1500, 7)
@@ -524,7 +529,7 @@ def test_cell_factors_match_their_formula(truth_scene):
     from hdrio.align.deghost import comparametric_correction, consistency_variance
     from hdrio.align.registration import linear_tables
     from hdrio.align.resampling import cell_factors
-    from hdrio.merge.noise import fit_noise, observation_variance
+    from hdrio.radiometry.noise import fit_noise, observation_variance
 
     moving, warps, reference = _moving(truth_scene, 1)
     stack = align_stack(moving, Alignment(reference, np.stack(warps), "euclidean",

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage
 
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_inverse_response, render_brackets
+from hdrio.tools.synthetic import gamma_inverse_response, render_brackets
 
 TIMES = (0.01, 0.04, 0.16)
 PERSON = (slice(56, 88), slice(64, 96))

@@ -6,9 +6,9 @@ import pytest
 
 from hdrio.align.registration import estimate_alignment
 from hdrio.io.brackets import read_brackets
-from hdrio.merge_job import MergeOptions
-from hdrio.merge_output import exr_attributes
-from hdrio.pipeline import merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.output import exr_attributes
+from hdrio.job.run import merge_stack
 
 AUTO = MergeOptions(align="auto", deghost="auto")  # the defaults, spelt out
 

@@ -17,7 +17,7 @@ import pytest
 
 from hdrio.batch import MergeSet, merge_shoot
 from hdrio.cli import main
-from hdrio.imageops import read_image
+from hdrio.io.images import read_image
 
 distributed = pytest.importorskip("distributed", reason="Dask tests need the farm extra")
 

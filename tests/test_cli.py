@@ -13,7 +13,7 @@ import OpenEXR  # the test extra: proves our EXRs are readable by OpenEXR itself
 import OpenImageIO as oiio
 import pytest
 
-from hdrio.merge.weighting import WEIGHTING_METHODS
+from hdrio.radiometry.weighting import WEIGHTING_METHODS
 from tests.conftest import DEFAULT_EXPOSURES
 from tests.conftest import run_cli as run
 

@@ -12,7 +12,7 @@ import pytest
 
 from hdrio.cli.chain import OPERATIONS
 from hdrio.io.write import write_image
-from hdrio.synthetic import radiance_error, render_brackets, well_exposed
+from hdrio.tools.synthetic import radiance_error, render_brackets, well_exposed
 from tests.conftest import DEFAULT_EXPOSURES, ramp_radiance
 from tests.conftest import run_cli as run
 
@@ -316,8 +316,8 @@ def test_response_from_a_file_without_a_response(brackets, out, tmp_path, capsys
 def test_16_bit_tiff_brackets_merge_through_a_binned_response(tmp_path, out, capsys):
     # About a minute: at 1024 levels the response solve leaves the fast normal-equation
     # path for the dense SVD one (hdrio/response/debevec1997.py), 20-30 s per channel.
-    from hdrio.demo import DEMO_EXPOSURES
-    from hdrio.synthetic import demo_scene, gamma_response
+    from hdrio.tools.demo import DEMO_EXPOSURES
+    from hdrio.tools.synthetic import demo_scene, gamma_response
 
     truth = demo_scene(height=200, width=300)
     times = [n / d for n, d in DEMO_EXPOSURES]

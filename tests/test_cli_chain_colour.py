@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hdrio.cms.spaces import chromaticities
-from hdrio.imageops import read_image
+from hdrio.io.images import read_image
 from tests.conftest import run_cli as run
 
 

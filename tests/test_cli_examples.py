@@ -89,7 +89,7 @@ def segments(command: str, env: dict[str, str]) -> list[list[str]]:
 def fresh_folder(tmp_path: Path, monkeypatch) -> Path:
     """A folder holding the example files, made from the demo's brackets; beside it,
     ``../shared/data`` is the real data when present (the README's memorial example)."""
-    from hdrio.demo import DEMO_EXPOSURES, write_demo_brackets
+    from hdrio.tools.demo import DEMO_EXPOSURES, write_demo_brackets
 
     work = tmp_path / "work"
     (work / "shoot").mkdir(parents=True)

@@ -116,7 +116,7 @@ def test_one_adopted_neutral_rule(brackets, tmp_path, capsys):
 
 
 def test_exposure_text_is_short_and_exact():
-    from hdrio.merge_output import exposure_text
+    from hdrio.job.output import exposure_text
 
     assert exposure_text(np.float32(0.01)) == "0.01"
     assert exposure_text(1 / 3) == repr(1 / 3)  # a 64-bit time keeps every digit

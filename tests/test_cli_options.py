@@ -9,8 +9,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from hdrio.cli.options import MERGE_OPTIONS, OPTIONS_BY_NAME
-from hdrio.cli.registry import OPERATIONS
+from hdrio.cli.chain_registry import OPERATIONS
+from hdrio.cli.merge_arguments import MERGE_OPTIONS, OPTIONS_BY_NAME
 from tests.conftest import DEFAULT_EXPOSURES
 from tests.conftest import run_cli as run
 from tests.test_merge_exclusion import write_masks
@@ -175,7 +175,7 @@ def test_cli_modules_import_one_way():
         if name != "hdrio.cli":  # the entry point imports the chain lazily, nothing back
             visit(name, ())
     for name in ("chain_merge", "chain_ops", "chain_colour", "chain_output",
-                 "chain_pictures", "chain_batch", "options", "registry"):
+                 "chain_pictures", "chain_batch", "options", "chain_registry"):
         assert "hdrio.cli.chain" not in graph[f"hdrio.cli.{name}"], name
 
 
@@ -198,7 +198,7 @@ def test_a_flag_and_a_repeatable_option_in_the_table_work_in_argparse():
     a repeatable option a tuple, a bad value one line naming the option."""
     import argparse
 
-    from hdrio.cli.options import Option, add_arguments, settings_from_namespace
+    from hdrio.cli.merge_arguments import Option, add_arguments, settings_from_namespace
     from hdrio.cli.values import flag, positive_whole
     from hdrio.errors import HdrioError
 

@@ -12,10 +12,10 @@ import pytest
 from hdrio.cms.calibration import Calibration
 from hdrio.io.header import read_header
 from hdrio.io.write import Float2, write_image
-from hdrio.merge_job import MergeOptions
-from hdrio.merge_output import exr_attributes
-from hdrio.pipeline import merge_files
-from hdrio.synthetic import render_brackets
+from hdrio.job.options import MergeOptions
+from hdrio.job.output import exr_attributes
+from hdrio.job.run import merge_files
+from hdrio.tools.synthetic import render_brackets
 
 ROOT = Path(__file__).resolve().parents[1]
 # OpenImageIO adds these itself on write or read; hdrio does not write them.

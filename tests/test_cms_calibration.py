@@ -14,12 +14,12 @@ from hdrio.cms.calibration import (
     reference_code,
     region_mean_luminance,
 )
-from hdrio.cms.luminance import luminance
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.header import read_header
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files, merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files, merge_stack
+from hdrio.radiometry.luminance import luminance
 
 EXPOSURES = (1 / 16, 1 / 4, 1.0, 4.0)
 

@@ -98,7 +98,7 @@ def test_hdrio_check_command(tmp_path, capsys):
 
 
 def test_frobisher_colorchecker_delta_e(shared_data, tmp_path):
-    from hdrio.pipeline import merge_files
+    from hdrio.job.run import merge_files
 
     files = sorted(shared_data("frobisher_001").glob("IMG_26*.jpg"))
     path = tmp_path / "frobisher.exr"

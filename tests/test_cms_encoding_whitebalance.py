@@ -10,14 +10,14 @@ import OpenImageIO as oiio
 import pytest
 
 from hdrio.cli import main
+from hdrio.cms.display import preview_OCIO_display
 from hdrio.cms.encoding import encoding, encoding_from_metadata, resolve_encoding
-from hdrio.cms.luminance import luminance
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.io.header import read_header
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files, merge_stack
-from hdrio.tonemap.display import preview_OCIO_display
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files, merge_stack
+from hdrio.radiometry.luminance import luminance
 
 
 def test_encoding_names_and_aliases():

@@ -17,8 +17,8 @@ import pytest
 from hdrio.cms import lut, ocioconfig, spaces
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_codes
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "ocio" / "config.ocio"

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from hdrio.cms import spaces
-from hdrio.cms.luminance import KNOWN_CHROMATICITIES, normalised_primary_matrix
 from hdrio.errors import HdrioError
-from hdrio.imageops import read_image
 from hdrio.io.header import read_header
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files
+from hdrio.io.images import read_image
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files
+from hdrio.radiometry.luminance import KNOWN_CHROMATICITIES, normalised_primary_matrix
 
 RNG = np.random.default_rng(5)
 # Scene-linear values from deep shadow to bright highlights, some saturated colours.

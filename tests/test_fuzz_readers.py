@@ -18,7 +18,7 @@ from hdrio.io.brackets import read_codes
 from hdrio.io.exposure import read_exposure_table
 from hdrio.io.header import read_header
 from hdrio.io.write import write_exr, write_image
-from hdrio.response.stored import check_response_fits, response_from_header
+from hdrio.radiometry.saved_response import check_response_fits, response_from_header
 
 EXAMPLES = settings(max_examples=2000, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.too_slow])

@@ -16,7 +16,7 @@ import hdrio  # noqa: E402
 from hdrio.cli import main  # noqa: E402
 from hdrio.errors import InputError  # noqa: E402
 from hdrio.io.raw import RAW_CODE_MAX, read_raw  # noqa: E402
-from hdrio.synthetic import radiance_error  # noqa: E402
+from hdrio.tools.synthetic import radiance_error  # noqa: E402
 from tests.conftest import ramp_radiance  # noqa: E402
 from tests.synthetic_dng import BLACK, NEUTRAL, WHITE, mosaic_of, write_dng  # noqa: E402
 

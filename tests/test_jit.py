@@ -27,7 +27,7 @@ def test_compile_ahead_fills_the_cache_the_job_reads(tmp_path):
     cache = str(tmp_path / "numba-cache")
     stages = ["merge", "motion", "preview"]
     assert _run(["-c", _CACHED, *stages], cache) == "merge=False motion=False preview=False"
-    said = _run(["-m", "hdrio.precompile", "merge", "motion", "preview=reinhard-global"],
+    said = _run(["-m", "hdrio.tools.precompile", "merge", "motion", "preview=reinhard-global"],
                 cache)
     assert said.split() == stages  # each stage's name once it is cached (hdrio.jit waits on it)
     # A new process finds every kernel of those stages in the cache: the job's merge,
@@ -78,7 +78,7 @@ def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
 
     class _Process:
         def __init__(self, command, **_):
-            started.append(command[command.index("hdrio.precompile") + 2:])
+            started.append(command[command.index("hdrio.tools.precompile") + 2:])
 
     monkeypatch.setattr(jit.subprocess, "Popen", _Process)
     monkeypatch.setattr(jit, "_pending", {})

@@ -12,10 +12,10 @@ import pytest
 
 from hdrio.errors import HdrioError
 from hdrio.io.masks import mask_files, read_masks
-from hdrio.merge.debevec1997 import MergeStatistics
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_paths
 from hdrio.merge.exclusion import masked_statistics
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_paths
+from hdrio.merge.weighted_mean import MergeStatistics
 from tests.conftest import run_cli as run
 
 
@@ -147,7 +147,7 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
     With --align the mask must be warped with the bracket: the block, seen at its place
     on the reference, merges as the clean stack with the same masks does. (Left where it
     was drawn, the mask lets the garbage in.)"""
-    from hdrio.synthetic import demo_scene, render_brackets
+    from hdrio.tools.synthetic import demo_scene, render_brackets
 
     times = (1 / 16, 1 / 4, 1.0)
     scene = demo_scene(160, 224, seed=3) * 2.0

@@ -1,4 +1,4 @@
-"""Exposures from the data (hdrio.merge.exposures, --exposures-from-data): a bracket whose
+"""Exposures from the data (hdrio.merge.exposure_check, --exposures-from-data): a bracket whose
 EXIF exposure is off is named, and the data's estimate recovers it."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from hdrio.io.write import write_image
-from hdrio.merge.exposures import anchor_Theil_Sen
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
+from hdrio.merge.exposure_check import anchor_Theil_Sen
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_response, render_brackets
+from hdrio.tools.synthetic import gamma_response, render_brackets
 from tests.conftest import run_cli as run
 
 OFF = 2 ** (1 / 3)  # one bracket's metadata 1/3 stop long
@@ -150,7 +150,7 @@ def test_exposures_inferred_with_no_metadata(scene, curve, stops, said, shared_d
     scale); the merge's error against the scene is the true exposures' within 5 %
     (measured: equal to 4 digits)."""
     shared_data("openexr_scenes"), shared_data("crf_database")
-    from hdrio.pipeline import merge_paths
+    from hdrio.job.run import merge_paths
 
     codes, times, truth = _ladder(scene, curve, stops)
     paths = _write_shuffled(tmp_path, codes)
@@ -175,7 +175,7 @@ def test_exposures_inferred_from_jpeg(shared_data, tmp_path):
     within 5 % of the same files merged with the true exposures (0.0576 against
     0.0572)."""
     shared_data("openexr_scenes")
-    from hdrio.pipeline import merge_paths
+    from hdrio.job.run import merge_paths
 
     codes, times, truth = _ladder("Tree", "gamma", (2.0,) * 4)
     paths = _write_shuffled(tmp_path, codes, ".jpg")
@@ -312,7 +312,7 @@ def test_real_sets_stripped_of_metadata(shared_data, tmp_path):
     Not asserted, reported in docs/method.md: the Canon JPEGs of frobisher (3 stops) and
     'ghost' (2 stops) come out 3 2/3 and 2 2/3, the camera's curve steeper than sRGB's."""
     from hdrio.io.brackets import read_brackets
-    from hdrio.pipeline import merge_paths
+    from hdrio.job.run import merge_paths
 
     folder = shared_data("hdrtoolbox_stacks") / "alignment"
     files = sorted(folder.glob("*.jpg"))

@@ -1,10 +1,10 @@
-"""hdrio.merge.grouped: per-group medians equal NumPy's to the bit, means to rounding."""
+"""hdrio.radiometry.grouped: per-group medians equal NumPy's to the bit, means to rounding."""
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hdrio.merge.grouped import group_edges, group_means, group_medians
+from hdrio.radiometry.grouped import group_edges, group_means, group_medians
 
 
 @settings(max_examples=200, deadline=None)

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hdrio.merge.debevec1997 import clipped_everywhere_mask
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.merge.highlights import border_chromaticity
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
+from hdrio.merge.weighted_mean import clipped_everywhere_mask
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_inverse_response, hue_angle_error, render_brackets
+from hdrio.tools.synthetic import gamma_inverse_response, hue_angle_error, render_brackets
 
 LAMP = np.array([1.0, 0.45, 0.12])  # an orange lamp (linear Rec. 709, relative)
 PEAK = 1e5  # its centre, relative to a background of 0.05 .. 2
@@ -141,8 +141,8 @@ def test_unknown_mode_is_refused():
 def test_groups_of_blocks_give_what_the_whole_image_as_one_box_gives():
     # Lamps far apart (three groups of blocks) and an L-shaped clip: each region and
     # its ring lie in one group, so cutting the image into groups changes nothing.
-    from hdrio.merge.debevec1997 import estimate_tables
     from hdrio.merge.highlights import _reconstruct_box, clip_groups, reconstruct_highlights
+    from hdrio.radiometry.tables import estimate_tables
 
     scene = lamp_scene(256, 320)
     y, x = np.mgrid[0:256, 0:320]

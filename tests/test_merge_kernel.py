@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hdrio.merge.debevec1997 import merge_brackets
-from hdrio.response.curve import CameraResponse
+from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 from tests.merge_reference import merge_reference
 

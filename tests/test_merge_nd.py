@@ -8,9 +8,9 @@ import pytest
 
 from hdrio.errors import HdrioError
 from hdrio.io.write import write_image
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.merge.nd import NDFilter, nd_stops, parse_nd
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
 from hdrio.stack import ExposureStack
 from tests.conftest import run_cli as run
 from tests.nd_scene import CARD_PATCH, PATCH, sun_brackets, sun_scene
@@ -107,6 +107,6 @@ def test_nd_pattern_matching_nothing_is_an_error(brackets, tmp_path, capsys):
     assert code == 2 and "--nd 10:sun_*: matches none of the brackets" in err, err
     assert not (tmp_path / "o.exr").exists()
     with pytest.raises(HdrioError, match="--nd x: 'x' is not a number"):
-        from hdrio.cli.options import OPTIONS_BY_NAME
+        from hdrio.cli.merge_arguments import OPTIONS_BY_NAME
 
         OPTIONS_BY_NAME["--nd"].parse(["x"])

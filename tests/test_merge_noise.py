@@ -1,7 +1,7 @@
 """The noise model, the noise-aware estimators and the uncertainty layer (issue 13).
 
 Ground truth: the demo scene rendered through ``f(x) = x^(1/2.2)`` with the renderer's
-shot and read noise (``hdrio.synthetic.render_brackets``), so the true curve and the true
+shot and read noise (``hdrio.tools.synthetic.render_brackets``), so the true curve and the true
 noise model are known in the response's relative units.
 """
 
@@ -14,9 +14,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
 from hdrio.merge import MERGE_METHODS
-from hdrio.merge.estimators import NOISE_AWARE, effective_weights
-from hdrio.merge.noise import (
+from hdrio.merge.uncertainty import relative_uncertainty
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.estimators import ESTIMATORS
+from hdrio.radiometry.noise import (
     JPEG_CODE_VARIANCE,
     QUANTISATION,
     NoiseModel,
@@ -25,12 +29,8 @@ from hdrio.merge.noise import (
     observation_variance,
     usable_codes,
 )
-from hdrio.merge.uncertainty import relative_uncertainty
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
-from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import (
+from hdrio.tools.synthetic import (
     DEFAULT_READ_NOISE,
     DEFAULT_SHOT_NOISE,
     demo_scene,
@@ -141,7 +141,7 @@ def test_estimators_merge_to_finite_positive_radiance(demo, method):
 
 
 def test_header_records_the_estimator_and_the_noise_model(demo):
-    from hdrio.merge_output import exr_attributes
+    from hdrio.job.output import exr_attributes
 
     _, stack, _ = demo
     attributes = exr_attributes(merge_stack(stack, MergeOptions()))
@@ -171,8 +171,8 @@ def test_uncertainty_of_the_inverse_variance_merge_is_one_over_the_weight_sum(de
     _, stack, _ = demo
     response, unit = gamma_truth()
     noise = true_noise(unit)
-    weights = effective_weights("inverse-variance", response, stack.exposures, "Debevec1997",
-                                noise)
+    weights = ESTIMATORS["inverse-variance"].weight_tables(response, stack.exposures,
+                                                           "Debevec1997", noise)
     layer = relative_uncertainty(stack, response, weights, noise)
     radiance, _ = MERGE_METHODS["inverse-variance"](stack, response, noise=noise)
     # one pixel by hand: sigma_E = 1 / sqrt(sum_j w_j) over its unsaturated brackets
@@ -197,7 +197,8 @@ def stress():
 @given(step=st.floats(-20, 20).filter(lambda s: abs(s) >= 0.05),
        count=st.integers(2, 20), bits=st.sampled_from([8, 10, 12, 16]),
        scene=st.sampled_from(["ramp", "flat", "clipped", "black"]),
-       method=st.sampled_from(NOISE_AWARE))
+       method=st.sampled_from([name for name, estimator in ESTIMATORS.items()
+                                      if estimator.needs_noise]))
 def test_noise_aware_estimators_never_fail(step, count, bits, scene, method):
     # Exposure ratios 2^-20..2^20 between neighbours, 2..20 brackets, 8..16 bits, flat and
     # all-clipped or all-black scenes: the fit and the merge never raise, every value is
@@ -253,7 +254,7 @@ def test_nonnegative_least_squares_matches_scipy():
     exact up to the rounding of a 3x3 solve), and no negative coefficient."""
     from scipy.optimize import nnls
 
-    from hdrio.merge.noise import nonnegative_least_squares
+    from hdrio.radiometry.noise import nonnegative_least_squares
 
     rng = np.random.default_rng(0)
     for trial in range(500):

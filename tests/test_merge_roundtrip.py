@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import hdrio
-from hdrio.merge.debevec1997 import merge_brackets
-from hdrio.response.curve import CameraResponse
+from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import radiance_error, render_brackets, tabulated_response, well_exposed
+from hdrio.tools.synthetic import radiance_error, render_brackets, tabulated_response, well_exposed
 
 SCENES = ["CandleGlass", "Desk", "GoldenGate", "MtTamWest", "StillLife", "Tree"]
 # Evenly spaced DoRF curves. Curves with a strong toe (e.g. 120, 200) reach 2.0-2.6 %
@@ -133,7 +133,7 @@ def test_solver_reproduces_opencv_calibrate_debevec_on_its_samples(shared_data):
     # cv2.createCalibrateDebevec run here, within OpenCV's own test tolerance of 10 %
     # over the well-exposed codes 20-235 (measured 1.7-7.0 %; OpenCV solves in float32).
     cv2 = pytest.importorskip("cv2", reason="OpenCV is a benchmark extra: pip install .[bench]")
-    from hdrio.merge.weighting import weighting_tutorial_hat
+    from hdrio.radiometry.weighting import weighting_tutorial_hat
     from hdrio.response.debevec1997 import g_solve_Debevec1997
 
     folder = shared_data("memorial_debevec")

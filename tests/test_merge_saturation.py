@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hdrio.merge.estimators import MERGE_METHODS
+from hdrio.merge.methods import MERGE_METHODS
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_inverse_response, hue_angle_error, render_camera_brackets
+from hdrio.tools.synthetic import gamma_inverse_response, hue_angle_error, render_camera_brackets
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
@@ -103,8 +103,8 @@ def test_safe_policy_matches_the_raw_clip_oracle_with_noise():
 
 def test_auto_keeps_channels_apart_on_an_unmixed_camera():
     from benchmarks.truth.stacks import exposure_ladder
-    from hdrio.merge.noise import NoiseModel
     from hdrio.merge.saturation import policy_limits
+    from hdrio.radiometry.noise import NoiseModel
 
     scene = _scene("Desk")
     times = exposure_ladder(scene, 7, 2.0)
@@ -127,8 +127,8 @@ def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
     # where a camera's matrix still biases every pixel, it is 0.22 and 0.13.
     from benchmarks.truth.stacks import exposure_ladder, jpeg_round_trip
     from hdrio.merge import saturation
-    from hdrio.merge.noise import code_variance_floor, fit_noise, noise_grid
-    from hdrio.synthetic import render_brackets
+    from hdrio.radiometry.noise import code_variance_floor, fit_noise, noise_grid
+    from hdrio.tools.synthetic import render_brackets
 
     scene = _scene(name)
     times = exposure_ladder(scene, 7, 2.0)
@@ -165,8 +165,8 @@ def _frobisher() -> list[Path]:
 def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
     from hdrio.cms.checks import check_exr
     from hdrio.io.header import read_header
-    from hdrio.merge_job import MergeOptions
-    from hdrio.pipeline import merge_files
+    from hdrio.job.options import MergeOptions
+    from hdrio.job.run import merge_files
 
     output = tmp_path / "f.exr"
     result = merge_files(_frobisher(), output, options=MergeOptions(clip_mask=True),
@@ -197,10 +197,10 @@ def test_clip_mask_round_trip_and_check_summary(tmp_path):
     import OpenImageIO as oiio
 
     from hdrio.cms.checks import check_exr, format_report
-    from hdrio.demo import write_demo_brackets
-    from hdrio.merge.debevec1997 import clipped_everywhere_mask
-    from hdrio.merge_job import MergeOptions
-    from hdrio.pipeline import merge_files
+    from hdrio.job.options import MergeOptions
+    from hdrio.job.run import merge_files
+    from hdrio.merge.weighted_mean import clipped_everywhere_mask
+    from hdrio.tools.demo import write_demo_brackets
 
     _, files = write_demo_brackets(tmp_path)
     output = tmp_path / "demo.exr"

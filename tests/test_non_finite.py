@@ -8,9 +8,9 @@ import OpenImageIO as oiio
 import pytest
 
 from hdrio.errors import InputError
-from hdrio.imageops import replace_non_finite
+from hdrio.io.images import replace_non_finite
 from hdrio.io.write import write_exr
-from hdrio.synthetic import demo_scene
+from hdrio.tools.synthetic import demo_scene
 from tests.conftest import run_cli
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from hdrio.errors import HdrioError
-from hdrio.merge_job import MergeOptions
+from hdrio.job.options import MergeOptions
 from hdrio.numbers import NumberError, check_number, check_tonemap_parameters
 
 

@@ -12,9 +12,9 @@ pytest.importorskip("matplotlib", reason="pictures need matplotlib (the 'plot' e
 
 import hdrio  # noqa: E402
 from hdrio.cli import main  # noqa: E402
-from hdrio.plots import dominant_bracket  # noqa: E402
 from hdrio.response import response_linear  # noqa: E402
 from hdrio.stack import ExposureStack  # noqa: E402
+from hdrio.tools.plots import dominant_bracket  # noqa: E402
 from tests.conftest import DEFAULT_EXPOSURES  # noqa: E402
 
 PICTURES = ("--plot-response", "--plot-contribution", "--plot-stops", "--contact-sheet")

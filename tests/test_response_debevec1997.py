@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hdrio.errors import ResponseSolveError
-from hdrio.merge.weighting import weighting_Debevec1997, weighting_tutorial_hat
+from hdrio.radiometry.weighting import weighting_Debevec1997, weighting_tutorial_hat
 from hdrio.response.debevec1997 import debevec1997_system, g_solve_Debevec1997
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from hdrio.merge.weighting import weighting_Debevec1997, weighting_tutorial_hat
+from hdrio.radiometry.weighting import weighting_Debevec1997, weighting_tutorial_hat
 from hdrio.response import cholesky
 from hdrio.response.debevec1997 import debevec1997_system, g_solve_Debevec1997
 from hdrio.response.normal_equations import Debevec1997Rows

@@ -7,7 +7,7 @@ import pytest
 
 from hdrio.response import RESPONSE_METHODS
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import demo_scene, render_brackets
+from hdrio.tools.synthetic import demo_scene, render_brackets
 
 CODES = np.arange(20, 236)  # away from the ends, where neither method is constrained
 

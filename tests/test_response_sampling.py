@@ -8,14 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from hdrio.response.sampling import (
-    _BINS,
-    CANDIDATE_LIMIT,
-    candidate_stride,
-    sample_codes,
-    samples_stratified,
-)
-from hdrio.synthetic import demo_scene, render_brackets
+from hdrio.io.staging import CANDIDATE_LIMIT, candidate_stride
+from hdrio.response.sampling import _BINS, sample_codes, samples_stratified
+from hdrio.tools.synthetic import demo_scene, render_brackets
 
 EXPOSURES = (1 / 64, 1 / 16, 1 / 4, 1.0, 4.0)
 

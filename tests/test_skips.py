@@ -20,11 +20,11 @@ from benchmarks.speed.scene import (
 from hdrio.io import brackets as brackets_module
 from hdrio.io.brackets import read_brackets
 from hdrio.io.write import write_image
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files, merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files, merge_stack
 from hdrio.response import response_Debevec1997
 from hdrio.skips import COVERING, SKIPS, classify, well_exposed_codes
-from hdrio.synthetic import radiance_error
+from hdrio.tools.synthetic import radiance_error
 from tests.conftest import run_cli
 
 SIZE = (120, 180)
@@ -115,7 +115,7 @@ def test_saved_response_skips_the_solve_and_gives_the_same_exr(tmp_path, capsys)
                            "-o", tmp_path / "second.exr", "-q", "-d", "float",
                            "--response-from", first)
     assert code == 0 and f"solve (response from {first})" in out
-    from hdrio.imageops import read_image
+    from hdrio.io.images import read_image
 
     # The header keeps g as float32 (|g| < 6 here: 4e-7 absolute, so relative in E), and
     # the kernel rounds ln E to float32 either way (|ln E| < 9: 5e-7): 3e-6 covers both.

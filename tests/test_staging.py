@@ -6,7 +6,7 @@ import numpy as np
 
 from hdrio.io.brackets import read_brackets
 from hdrio.io.staging import codes_buffer, is_staged, release
-from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.merge.weighted_mean import merge_brackets
 from hdrio.response import response_Debevec1997
 from hdrio.stack import ExposureStack
 

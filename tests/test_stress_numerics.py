@@ -24,10 +24,10 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from hdrio.errors import ResponseSolveError
-from hdrio.merge.debevec1997 import merge_brackets
+from hdrio.merge.weighted_mean import merge_brackets
 from hdrio.response.debevec1997 import response_Debevec1997
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import gamma_response, radiance_error, render_brackets, well_exposed
+from hdrio.tools.synthetic import gamma_response, radiance_error, render_brackets, well_exposed
 
 SHAPE = (32, 48)  # 1536 pixels: fewer than the 5000 samples asked for at most, on purpose
 BITS = (8, 10, 12, 14, 16)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hdrio.cms.luminance import luminance_weights
+from hdrio.radiometry.luminance import luminance_weights
 from hdrio.tonemap import TONEMAP_METHODS
 from hdrio.tonemap.reinhard2002 import (
     tonemap_Reinhard2002_global,
@@ -263,7 +263,7 @@ def test_registry_resolves_names_case_insensitively():
 
 
 def test_log_average_luminance_is_eq_1_with_negatives_counted_as_zero():
-    from hdrio.tonemap.reinhard2002 import log_average_luminance
+    from hdrio.radiometry.luminance import log_average_luminance
 
     L = np.array([[0.01, 1.0], [100.0, -5.0]])
     # rtol 1e-12: the same float64 formula written out.

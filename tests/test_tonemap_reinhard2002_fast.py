@@ -9,7 +9,6 @@ import pytest
 import scipy.ndimage
 
 from hdrio.parallel import threads
-from hdrio.synthetic import demo_scene
 from hdrio.tonemap import reinhard2002_kernels as kernels
 from hdrio.tonemap.reinhard2002 import (
     ALPHA_1,
@@ -18,6 +17,7 @@ from hdrio.tonemap.reinhard2002 import (
     tonemap_Reinhard2002_global,
     tonemap_Reinhard2002_local,
 )
+from hdrio.tools.synthetic import demo_scene
 from tests.reinhard2002_reference import reference_global, reference_local
 from tests.test_tonemap_reinhard2002 import hdr_image
 

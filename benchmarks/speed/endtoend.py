@@ -26,7 +26,7 @@ from hdrio.stack import ExposureStack
 # benchmark process would report its parent's peak.
 _PEAK_PROBE = """
 import json, sys, time
-from hdrio.pipeline import merge_files
+from hdrio.job.run import merge_files
 paths, exposures, output = sys.argv[1].split(","), sys.argv[2].split(","), sys.argv[3]
 start = time.perf_counter()
 result = merge_files(paths, output, exposures=exposures)
@@ -86,7 +86,7 @@ def _peak(paths: list[Path], exposures: list[str], output: Path) -> dict:
 
 
 def run(stack: ExposureStack, repeats: int, counts: tuple[int, ...] = (5, 7, 9)) -> list[dict]:
-    from hdrio.pipeline import merge_files
+    from hdrio.job.run import merge_files
 
     rows: list[dict] = []
     exposures = [repr(float(t)) for t in stack.exposures]

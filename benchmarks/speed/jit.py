@@ -16,7 +16,7 @@ _PROBE = """
 import json, sys, tempfile, time
 from pathlib import Path
 from hdrio.io.write import write_image
-from hdrio.pipeline import merge_files
+from hdrio.job.run import merge_files
 from benchmarks.speed.scene import bracket_stack
 stack, _ = bracket_stack(64, 96, count=3)
 folder = Path(tempfile.mkdtemp())

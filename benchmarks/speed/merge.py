@@ -11,11 +11,12 @@ import numpy as np
 from benchmarks.speed.floor import parallel_copy
 from benchmarks.speed.scene import true_response
 from benchmarks.timing import measure_alternately, measure_call
-from hdrio.merge.debevec1997 import estimate_tables, merge_brackets
-from hdrio.merge.estimators import MERGE_METHODS
 from hdrio.merge.highlights import reconstruct_highlights
+from hdrio.merge.methods import MERGE_METHODS
+from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.tables import estimate_tables
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import radiance_error, well_exposed
+from hdrio.tools.synthetic import radiance_error, well_exposed
 
 
 def reconstructed(stack: ExposureStack, response) -> np.ndarray:
@@ -37,7 +38,7 @@ def run(stack: ExposureStack, radiance: np.ndarray, repeats: int) -> list[dict]:
     # merges allocate their output each call, as a caller's merge does.
     destination = np.empty_like(stack.codes)
     # "inverse-variance" is the default estimator with its noise model fitted from the
-    # codes inside the call (hdrio.merge.noise): what a merge costs now, against "log",
+    # codes inside the call (hdrio.radiometry.noise): what a merge costs now, against "log",
     # the kernel as it was before the noise model.
     timings = measure_alternately({
         "floor": lambda: parallel_copy(stack.codes, destination),

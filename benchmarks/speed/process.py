@@ -26,7 +26,7 @@ import numpy as np
 
 from benchmarks.speed.endtoend import write_jpegs
 from benchmarks.speed.scene import bracket_stack
-from hdrio.imageops import read_image
+from hdrio.io.images import read_image
 
 _TIME = "/usr/bin/time"
 _FLOOR = """

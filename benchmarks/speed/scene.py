@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.truth.curves import Curve
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import demo_scene, render_brackets
+from hdrio.tools.synthetic import demo_scene, render_brackets
 
 TILE = (1000, 1500)
 _LEVELS = np.linspace(0.0, 1.0, 4097)

@@ -22,11 +22,11 @@ from benchmarks.speed.scene import (
     true_response,
 )
 from benchmarks.timing import measure_alternately
-from hdrio.merge.debevec1997 import merge_brackets
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files, merge_stack
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files, merge_stack
+from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.saved_response import read_response
 from hdrio.response import response_Debevec1997
-from hdrio.response.stored import read_response
 
 
 def _pair(rows: list[dict], name: str, scene: str, on, off, repeats: int) -> None:

@@ -1,7 +1,7 @@
 """Real camera response curves: DoRF (201 measured curves) and the EMoR mean curve.
 
 Each curve maps sensor exposure ``X`` on [0, 1] to brightness on [0, 1]; brackets are
-rendered through it (:func:`hdrio.synthetic.tabulated_response`) and its exact inverse
+rendered through it (:func:`hdrio.tools.synthetic.tabulated_response`) and its exact inverse
 is the truth that recovered responses are compared with.
 """
 
@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 from benchmarks.truth.scenes import data_folder
-from hdrio.synthetic import Response, tabulated_response
+from hdrio.tools.synthetic import Response, tabulated_response
 
 #: The fixed subset: evenly spread DoRF rows (120 and 200 have a strong toe, which
 #: docs/method.md names as hdrio's known weak spot) and the EMoR mean curve ``f0``.
@@ -31,7 +31,7 @@ class Curve:
 
     @property
     def response(self) -> Response:
-        """``f`` as a callable on [0, 1], for :func:`hdrio.synthetic.render_brackets`."""
+        """``f`` as a callable on [0, 1], for :func:`hdrio.tools.synthetic.render_brackets`."""
         return tabulated_response(self.irradiance, self.brightness)
 
     def log_inverse(self, codes: np.ndarray, code_max: int) -> np.ndarray:

@@ -18,11 +18,11 @@ import numpy as np
 
 from benchmarks.truth.report import NOISE_ORACLE
 from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE, Stack
-from hdrio.merge.estimators import MERGE_METHODS
-from hdrio.merge.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
-from hdrio.response.curve import CameraResponse
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
+from hdrio.merge.methods import MERGE_METHODS
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
 from hdrio.stack import ExposureStack
 
 
@@ -100,7 +100,7 @@ def true_response(stack: Stack) -> tuple[CameraResponse, float]:
 
 
 def true_noise(stack: Stack) -> NoiseModel:
-    """The renderer's noise (:func:`hdrio.synthetic.render_brackets`) in the response's
+    """The renderer's noise (:func:`hdrio.tools.synthetic.render_brackets`) in the response's
     relative units: shot and read noise of the sensor, rounding of the codes."""
     _, unit = true_response(stack)
     return NoiseModel(np.full(3, SHOT_NOISE / unit), np.full(3, READ_NOISE**2 / unit**2),

@@ -3,7 +3,7 @@
 Regions (disjoint), from the codes the methods actually saw:
 
 ``well``
-    well exposed in at least one bracket (:func:`hdrio.synthetic.well_exposed`: every
+    well exposed in at least one bracket (:func:`hdrio.tools.synthetic.well_exposed`: every
     channel inside 5-95 % of the code range).
 ``clipped``
     a channel at or above 95 % of the code range even in the shortest bracket.
@@ -13,7 +13,7 @@ Regions (disjoint), from the codes the methods actually saw:
     the rest: extreme colours, one channel dark in every bracket where another is in
     range (a deep red whose blue never leaves the toe).
 
-The global scale is fitted once on ``well`` (:func:`hdrio.synthetic.radiance_error`)
+The global scale is fitted once on ``well`` (:func:`hdrio.tools.synthetic.radiance_error`)
 and the same scale is applied to ``clipped``, ``black`` and ``other``. Errors use finite, positive
 pixels only; the others are counted.
 """
@@ -27,8 +27,8 @@ import numpy as np
 from benchmarks.truth.curves import Curve
 from benchmarks.truth.methods import MethodOutput
 from benchmarks.truth.stacks import Stack
-from hdrio.cms.luminance import luminance
-from hdrio.synthetic import radiance_error, well_exposed
+from hdrio.radiometry.luminance import luminance
+from hdrio.tools.synthetic import radiance_error, well_exposed
 
 LOW, HIGH = 0.05, 0.95
 RESPONSE_RANGE = (10 / 255, 245 / 255)  # codes 10..245 for 8-bit
@@ -47,7 +47,7 @@ def errors_at_scale(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray,
                     scale: float) -> dict[str, float | None]:
     """Relative errors of ``scale * estimate`` over ``mask`` pixels (all channels).
 
-    Like :func:`hdrio.synthetic.radiance_error` but with a given scale, plus ``bias``:
+    Like :func:`hdrio.tools.synthetic.radiance_error` but with a given scale, plus ``bias``:
     the median signed ``log2(scale * E / T)`` (negative = underestimated).
     """
     e = np.asarray(estimate[mask], dtype=np.float64).ravel()

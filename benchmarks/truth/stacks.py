@@ -15,7 +15,7 @@ import numpy as np
 
 from benchmarks.truth.curves import Curve
 from benchmarks.truth.scenes import Scene
-from hdrio.synthetic import DEFAULT_READ_NOISE, DEFAULT_SHOT_NOISE, render_brackets
+from hdrio.tools.synthetic import DEFAULT_READ_NOISE, DEFAULT_SHOT_NOISE, render_brackets
 
 SHOT_NOISE = DEFAULT_SHOT_NOISE  # variance per unit exposure, relative to full well
 READ_NOISE = DEFAULT_READ_NOISE  # standard deviation, relative to full well
@@ -116,7 +116,7 @@ def jpeg_round_trip(codes: np.ndarray, quality: int = JPEG_QUALITY) -> np.ndarra
 
 
 def render_stack(spec: StackSpec, scene: Scene, curve: Curve) -> Stack:
-    """Render ``spec`` with :func:`hdrio.synthetic.render_brackets` (shot and read noise)."""
+    """Render ``spec`` with :func:`hdrio.tools.synthetic.render_brackets` (shot and read noise)."""
     if spec.jpeg and spec.bits != 8:
         raise ValueError("JPEG stacks are 8-bit")
     times = exposure_ladder(scene, spec.frames, spec.ev)

@@ -3,7 +3,7 @@
 Modules, one per method: :mod:`~hdrio.align.ward2003` (median threshold bitmaps),
 :mod:`~hdrio.align.lucaskanade` (sub-pixel refinement), :mod:`~hdrio.align.warp`
 (resampling codes), :mod:`~hdrio.align.registration` (the stack's alignment),
-:mod:`~hdrio.align.deghost` (consistency masks). ``hdrio.pipeline`` calls them.
+:mod:`~hdrio.align.deghost` (consistency masks). ``hdrio.job.run`` calls them.
 """
 
 ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")

@@ -489,14 +489,14 @@ def consistency_variance(response, exposures: np.ndarray, noise=None) -> np.ndar
     """The variance the consistency test allows each ``x_j(z) = f^-1(z) / dt_j``,
     ``(P, C, levels)``, relative radiance squared.
 
-    The stack's noise model (:func:`hdrio.merge.noise.observation_variance`: shot, read
+    The stack's noise model (:func:`hdrio.radiometry.noise.observation_variance`: shot, read
     and code noise, JPEG's floor) plus 3 % of the value for the response's own error,
     which the noise model leaves out and which two brackets see alike only where the
     curve is right; codes at ``Z_max`` and below the well-exposed range
     (:data:`hdrio.skips.WELL_EXPOSED`: where a solved ``g`` is extrapolated and noise
     dominates) say nothing (``inf``). Without a noise model, rounding of the codes alone.
     """
-    from hdrio.merge.noise import NoiseModel, observation_variance
+    from hdrio.radiometry.noise import NoiseModel, observation_variance
 
     code_max = response.code_max
     low, _ = well_exposed_codes(code_max)

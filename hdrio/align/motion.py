@@ -1,5 +1,7 @@
-"""The merge's alignment and deghosting steps, as :func:`hdrio.pipeline.merge_stack` runs
-them (``--align``, ``--deghost``)."""
+"""Alignment and deghosting as a merge runs them (``--align``, ``--deghost``): a stack and
+its response in; the warped stack and :class:`Motion` (the transforms, the keep weights
+of each bracket) out. The re-merge that reads them is the job's
+(:func:`hdrio.job.radiance.remerge_motion`)."""
 
 from __future__ import annotations
 
@@ -8,11 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hdrio.align import ALIGN_MODES, DEGHOST_MODES
 from hdrio.align.deghost import (
     CELL,
     Deghosting,
-    comparametric_correction,
     consistency_variance,
     deghost,
 )
@@ -27,13 +27,10 @@ from hdrio.align.registration import (
     register,
     sharp_edges,
 )
-from hdrio.align.resampling import remerge_resampled
 from hdrio.align.warp import coverage
 from hdrio.errors import HdrioError
-from hdrio.merge.debevec1997 import merge_tables
-from hdrio.merge.masked import remerge_masked
-from hdrio.merge.noise import NoiseModel, fit_noise, observation_variance
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel
 from hdrio.stack import ExposureStack
 
 
@@ -65,15 +62,6 @@ class Motion:
     keep: np.ndarray | None = None
     """``(P, rows, cols)`` keep weights on cells of :data:`hdrio.align.deghost.CELL`
     pixels, or ``None`` when no bracket is dropped anywhere."""
-
-
-def check_modes(align: str, deghost_mode: str) -> None:
-    """Raise ``ValueError`` naming the option when a mode is unknown."""
-    if align not in ALIGN_MODES:
-        raise ValueError(f"--align must be one of {', '.join(ALIGN_MODES)}, not {align!r}")
-    if deghost_mode not in DEGHOST_MODES:
-        raise ValueError(f"--deghost must be one of {', '.join(DEGHOST_MODES)}, "
-                         f"not {deghost_mode!r}")
 
 
 def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
@@ -120,7 +108,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     moving object's codes are rare (a bright object in one bracket bent the response
     enough to double the error inside it on the truth scene).
 
-    ``noise``: the stack's noise model (:mod:`hdrio.merge.noise`), which the consistency
+    ``noise``: the stack's noise model (:mod:`hdrio.radiometry.noise`), which the consistency
     test reads (:func:`hdrio.align.deghost.consistency_variance`)."""
     if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
         return response
@@ -156,38 +144,3 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         except HdrioError:  # too little left to solve from: keep the first response
             pass
     return response
-
-
-def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
-                 motion: Motion, weights: np.ndarray, domain: str, per_channel: bool,
-                 limits: tuple[int, ...], noise: NoiseModel | None = None) -> None:
-    """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
-    bracket (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights
-    (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain`` and its
-    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`).
-
-    When the brackets were warped, every warped bracket's weight is also lowered where
-    its resampling error outweighs its noise (:mod:`hdrio.align.resampling`; ``noise``:
-    the stack's noise model, fitted here when not given)."""
-    if motion.keep is None and not motion.warped:
-        return
-    terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
-                                    weights)
-
-    def remerge(codes, keep, out, first_row=0, rows=None, factors=None):
-        remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out, limits, first_row=first_row, rows=rows,
-                       factors=factors)
-
-    if not motion.warped:
-        remerge(stack.codes, motion.keep, radiance)
-        return
-    if noise is None:
-        noise = fit_noise(stack.codes, stack.exposures, response)
-    reference = motion.alignment.reference
-    allowed = consistency_variance(response, stack.exposures, noise)
-    remerge_resampled(stack.codes, stack.code_max, limits, motion.keep, CELL, reference,
-                      comparametric_correction(stack.codes, linear_tables(
-                          response, stack.exposures), allowed, reference),
-                      observation_variance(response, stack.exposures, noise), allowed,
-                      terms.imag, remerge, radiance)

@@ -40,8 +40,8 @@ from hdrio.align.pyramid import (
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.errors import HdrioError
-from hdrio.merge.debevec1997 import estimate_tables
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.tables import estimate_tables
 from hdrio.skips import well_exposed_codes
 from hdrio.stack import ExposureStack
 

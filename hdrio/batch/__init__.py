@@ -20,9 +20,9 @@ from hdrio.batch.grouping import (
 )
 from hdrio.batch.journal import is_done, record_done
 from hdrio.batch.partial import clean_partials, stale_partials
-from hdrio.batch.plan import DONE, RUN, SetTask, parse_shard, plan_sets, sets_json
 from hdrio.batch.pool import SetResult, run_local, run_set
 from hdrio.batch.shoot import MergeSet, merge_shoot, run_sets
+from hdrio.batch.tasks import DONE, RUN, SetTask, parse_shard, plan_sets, sets_json
 
 __all__ = [
     "DONE", "RUN", "BracketSet", "Frame", "MergeSet", "SetResult", "SetTask",

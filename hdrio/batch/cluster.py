@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from hdrio.batch.plan import SetTask
 from hdrio.batch.pool import OnResult, SetResult, Work, run_set, worker_threads
+from hdrio.batch.tasks import SetTask
 
 LOCAL = "local"
 _PRE_SPAWN = "distributed.nanny.pre-spawn-environ"

@@ -137,7 +137,7 @@ def group_frames(frames: Iterable[Frame], max_gap_s: float = DEFAULT_MAX_GAP_S,
         set (used only when every frame has a capture time).
     size : int, optional
         A fixed bracket count: every ``size`` frames of a series in capture order are one
-        set (the last may be short; see :func:`hdrio.batch.plan.plan_sets`).
+        set (the last may be short; see :func:`hdrio.batch.tasks.plan_sets`).
 
     Returns
     -------

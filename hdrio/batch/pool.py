@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from hdrio.batch.journal import record_done
 from hdrio.batch.partial import clean_partials
-from hdrio.batch.plan import SetTask
+from hdrio.batch.tasks import SetTask
 from hdrio.parallel import die_with_parent
 
 Work = Callable[[SetTask], tuple[bool, str]]

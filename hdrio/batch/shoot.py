@@ -15,10 +15,10 @@ from typing import Any
 
 from hdrio.batch.grouping import DEFAULT_MAX_GAP_S, group_brackets, list_images
 from hdrio.batch.partial import clean_partials
-from hdrio.batch.plan import RUN, SetTask, plan_sets
 from hdrio.batch.pool import OnResult, SetResult, Work, run_local
+from hdrio.batch.tasks import RUN, SetTask, plan_sets
 from hdrio.errors import HdrioError
-from hdrio.merge_job import MergeOptions
+from hdrio.job.options import MergeOptions
 
 
 def run_sets(tasks: Sequence[SetTask], work: Work, *, client: Any = None,
@@ -43,7 +43,7 @@ def run_sets(tasks: Sequence[SetTask], work: Work, *, client: Any = None,
 
 @dataclass(frozen=True)
 class MergeSet:
-    """Work for :func:`run_sets`: :func:`hdrio.pipeline.merge_files` of the set to its
+    """Work for :func:`run_sets`: :func:`hdrio.job.run.merge_files` of the set to its
     first output, and a tone-mapped preview to the second when there is one."""
 
     options: MergeOptions = field(default_factory=MergeOptions)
@@ -55,7 +55,7 @@ class MergeSet:
         return [repr(self)]
 
     def __call__(self, task: SetTask) -> tuple[bool, str]:
-        from hdrio.pipeline import merge_files
+        from hdrio.job.run import merge_files
 
         preview = task.outputs[1] if len(task.outputs) > 1 else None
         try:

@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Sequence
 
 from hdrio import __version__
-from hdrio.cli import colour
+from hdrio.cli import check, export_response
 from hdrio.errors import HdrioError
 
 # colour-science warns at import when Matplotlib is absent; only its plotting needs it
@@ -48,8 +48,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         commands.add_merge(sub)
         commands.add_info(sub)
         commands.add_demo(sub)
-    colour.add_check(sub)
-    colour.add_export_response(sub)
+    check.add_check(sub)
+    export_response.add_export_response(sub)
     return parser
 
 

@@ -3,10 +3,10 @@
 Inputs are read onto a stack: bracket files wait for ``--merge``, float images (EXR,
 HDR) go straight onto the image stack; operations act on the top image; ``-o`` writes
 it and the chain goes on. This module assembles the chain: it imports the operation
-modules (each registers its operations in :mod:`hdrio.cli.registry`, which they import
+modules (each registers its operations in :mod:`hdrio.cli.chain_registry`, which they import
 and which imports none of them), checks the whole command line before any work
-(:func:`hdrio.cli.registry.validate`) and runs it. Argument parsing and printing only:
-the steps call :mod:`hdrio.pipeline` and the core modules.
+(:func:`hdrio.cli.chain_registry.validate`) and runs it. Argument parsing and printing only:
+the steps call :mod:`hdrio.job.run` and the core modules.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from hdrio.cli import (  # noqa: F401  (inputs, merge, image steps)  # noqa: F40
     chain_pictures,
 )
 from hdrio.cli.chain_merge import PENDING
+from hdrio.cli.chain_registry import OPERATIONS, Chain, ChainError, Step, parse, run_steps, validate
 from hdrio.cli.progress import Progress
-from hdrio.cli.registry import OPERATIONS, Chain, ChainError, Step, parse, run_steps, validate
 from hdrio.errors import HdrioError
 
 

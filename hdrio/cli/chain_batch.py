@@ -13,8 +13,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from hdrio.cli.chain_registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.cli.progress import Progress
-from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Step, operation, run_steps
 from hdrio.errors import HdrioError
 
 # Steps that say how to run, not what to make: not part of a set's fingerprint.
@@ -42,7 +42,7 @@ def _seconds(values: list[str]) -> float:
 
 
 def _shard(values: list[str]) -> tuple[int, int]:
-    from hdrio.batch.plan import parse_shard
+    from hdrio.batch.tasks import parse_shard
 
     return parse_shard(values[0])
 
@@ -127,7 +127,7 @@ def _recipe(steps: list[Step]) -> tuple[list[str], list[Path]]:
 def _plan(chain: Chain, steps: list[Step], rest: list[Step]):
     """The :class:`hdrio.batch.SetTask` of every set (of this shard)."""
     from hdrio.batch.grouping import DEFAULT_MAX_GAP_S, group_brackets
-    from hdrio.batch.plan import plan_sets
+    from hdrio.batch.tasks import plan_sets
     from hdrio.cli.chain_output import output_path
     from hdrio.io.paths import check_not_an_input
 
@@ -278,7 +278,7 @@ def run_groups(chain: Chain, _values: list[str], rest: list[Step],
 def print_plan(chain: Chain, steps: list[Step]) -> None:
     """``--dry-run``: the steps, the sets ``--group`` would find, and what would be done."""
     from hdrio.batch import DONE, RUN, sets_json
-    from hdrio.cli.registry import OPERATIONS
+    from hdrio.cli.chain_registry import OPERATIONS
 
     if not chain.settings.get("list_sets"):
         chain.say("plan (dry run, nothing is written):")

@@ -1,18 +1,18 @@
 """The chain's colour operations: ``--colorconvert``, ``--colorspace``, ``--ociodisplay``.
 
 OpenColorIO does the work (:mod:`hdrio.cms.spaces`); the config is ``--colorconfig``'s
-(a merge option: :mod:`hdrio.cli.options`), else ``$OCIO``, else OCIO's built-in CG
+(a merge option: :mod:`hdrio.cli.merge_arguments`), else ``$OCIO``, else OCIO's built-in CG
 config. The image's space is the one its header records (``hdrio:colorSpace``; linear
 Rec.709 when it says nothing), and every conversion rewrites the attributes that say
-what the pixels are (:func:`hdrio.cms.stage.space_attributes`) to match.
+what the pixels are (:func:`hdrio.cms.colour_stage.space_attributes`) to match.
 """
 
 from __future__ import annotations
 
 from hdrio.cli.chain_merge import note_pending
 from hdrio.cli.chain_ops import needs_scene_linear
-from hdrio.cli.options import OPTIONS_BY_NAME, set_value
-from hdrio.cli.registry import Chain, ChainError, Image, operation
+from hdrio.cli.chain_registry import Chain, ChainError, Image, operation
+from hdrio.cli.merge_arguments import OPTIONS_BY_NAME, set_value
 
 
 def _config(chain: Chain) -> str | None:
@@ -27,7 +27,7 @@ def _space_of(image: Image) -> str:
 
 def _convert(chain: Chain, image: Image, source: str, target: str) -> None:
     from hdrio.cms import spaces
-    from hdrio.cms.stage import space_attributes
+    from hdrio.cms.colour_stage import space_attributes
 
     if image.display:
         raise ChainError("the image is display-referred (after --tonemap or --ociodisplay); "
@@ -103,8 +103,8 @@ def _check_ociodisplay(chain: Chain, value: tuple[str, str]) -> None:
                    "'ACES 2.0 - SDR 100 nits (Rec.709)' -o preview.jpg")
 def _ociodisplay(chain: Chain, value: tuple[str, str]) -> None:
     from hdrio.cms import spaces
-    from hdrio.cms.stage import display_attributes
-    from hdrio.tonemap.display import preview_OCIO_display
+    from hdrio.cms.colour_stage import display_attributes
+    from hdrio.cms.display import preview_OCIO_display
 
     display, view = value
     image = chain.top()

@@ -1,9 +1,9 @@
 """The chain's ``--merge`` and its options: every option of ``hdrio merge``, one table.
 
-Each entry of :data:`hdrio.cli.options.MERGE_OPTIONS` becomes a chain operation that
+Each entry of :data:`hdrio.cli.merge_arguments.MERGE_OPTIONS` becomes a chain operation that
 sets up the next ``--merge`` (``hdrio a.jpg b.jpg c.jpg --lambda 10 --merge -o out.exr``),
 so both front ends take the same options with the same names and meanings and build the
-same :class:`~hdrio.merge_job.MergeOptions`. Two entries are spelled differently here:
+same :class:`~hdrio.job.options.MergeOptions`. Two entries are spelled differently here:
 the merge domain is ``--merge``'s own optional argument, and ``--colorspace`` (an image
 operation too) is registered by :mod:`hdrio.cli.chain_colour`.
 """
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from hdrio.cli.options import MERGE_OPTIONS, Option, merge_method, merge_options, set_value
-from hdrio.cli.registry import Chain, ChainError, Image, operation
+from hdrio.cli.chain_registry import Chain, ChainError, Image, operation
+from hdrio.cli.merge_arguments import MERGE_OPTIONS, Option, merge_method, merge_options, set_value
 
 IN_OTHER_OPERATIONS = frozenset({"--merge", "--colorspace"})
 PENDING = "_pending_merge_options"  # validation: options given since the last --merge
@@ -91,8 +91,8 @@ def _optional_domain(token: str) -> bool:
                 "same names: --lambda, --weighting, --uncertainty, --colorspace...)",
            example="a.jpg b.jpg c.jpg --lambda 10 --merge log -o out.exr")
 def _merge(chain: Chain, domain: str | None) -> None:
-    from hdrio.merge_output import exr_attributes, merge_alpha, merge_layers, output_pixels
-    from hdrio.pipeline import merge_paths
+    from hdrio.job.output import exr_attributes, merge_alpha, merge_layers, output_pixels
+    from hdrio.job.run import merge_paths
 
     if not chain.brackets:
         raise ChainError("no brackets to merge: give the bracket files before --merge")

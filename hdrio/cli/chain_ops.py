@@ -1,5 +1,5 @@
 """The chain's inputs and image steps, one registered function each (see
-:func:`hdrio.cli.registry.operation`).
+:func:`hdrio.cli.chain_registry.operation`).
 
 To add one, write (and add ``check`` when it can fail on its arguments)::
 
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.cli.options import tonemap_arguments
-from hdrio.cli.registry import FLOAT_SUFFIXES, Chain, ChainError, Image, operation
+from hdrio.cli.chain_registry import FLOAT_SUFFIXES, Chain, ChainError, Image, operation
+from hdrio.cli.merge_arguments import tonemap_arguments
 from hdrio.errors import HdrioError
 
 # ----------------------------------------------------------------------------- inputs
@@ -80,8 +80,8 @@ def read_input(chain: Chain, path: Path) -> None:
     if path.is_dir() or path.suffix.lower() not in FLOAT_SUFFIXES:
         chain.brackets.extend(files)
         return
-    from hdrio.imageops import read_image
     from hdrio.io.header import read_typed_attributes
+    from hdrio.io.images import read_image
 
     pixels, alpha = read_image(path, say=chain.note, alpha=True)
     attributes = {name: value for name, value in read_typed_attributes(path).items()
@@ -105,7 +105,7 @@ def _stops(values: list[str]) -> float:
            help="scale the scene-linear image by 2^STOPS",
            example="out.exr --exposure -1.5 -o darker.exr")
 def _exposure(chain: Chain, stops: float) -> None:
-    from hdrio.imageops import apply_exposure
+    from hdrio.tools.imageops import apply_exposure
 
     image = needs_scene_linear(chain)
     image.statistics = None
@@ -124,9 +124,9 @@ def _tonemap_check(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
                 "their -tutorial variants; optional operator parameters",
            example="out.exr --tonemap reinhard-global key=0.18,white=8 -o preview.jpg")
 def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
-    from hdrio.cms.luminance import DEFAULT_SPACE
+    from hdrio.cms.colour_stage import display_attributes
     from hdrio.cms.spaces import colour_science_name
-    from hdrio.cms.stage import display_attributes
+    from hdrio.radiometry.luminance import DEFAULT_SPACE
     from hdrio.tonemap.preview import render_preview
 
     name, parameters = value
@@ -153,7 +153,7 @@ def _size(values: list[str]) -> str:
            help="resample to WIDTHxHEIGHT (a 0 keeps the aspect ratio) or to N%",
            example="out.exr --resize 300x0 -o small.exr")
 def _resize(chain: Chain, size: str) -> None:
-    from hdrio.imageops import resize
+    from hdrio.tools.imageops import resize
 
     image = chain.top()
     height, width = image.pixels.shape[:2]

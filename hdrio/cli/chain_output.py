@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.cli.chain_registry import Chain, ChainError, Image, one_argument, operation
 from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, check_output, make_parent
-from hdrio.cli.registry import Chain, ChainError, Image, one_argument, operation
 from hdrio.cli.values import positive_whole
 
 _COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
@@ -87,7 +87,7 @@ def _check_output(chain: Chain, text: str) -> None:
            example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
     from hdrio.io.write import write_exr, write_preview
-    from hdrio.merge_output import write_radiance
+    from hdrio.job.output import write_radiance
 
     image = chain.top()
     path = output_path(chain, text)
@@ -163,7 +163,7 @@ def _info(chain: Chain, _values: list[str]) -> None:
            example="a.jpg b.jpg c.jpg --merge --stats",
            check=lambda chain, _values: chain.top())
 def _stats(chain: Chain, _values: list[str]) -> None:
-    from hdrio.imageops import image_statistics
+    from hdrio.tools.imageops import image_statistics
 
     stats = image_statistics(chain.top().pixels)
     for name in ("min", "max", "mean"):

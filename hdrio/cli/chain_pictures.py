@@ -1,10 +1,10 @@
-"""Chain operations that draw pictures of the latest merge (PNG, through hdrio.plots)."""
+"""Chain operations that draw pictures of the latest merge (PNG, through hdrio.tools.plots)."""
 
 from __future__ import annotations
 
 from hdrio.cli.chain_output import output_path
+from hdrio.cli.chain_registry import Chain, ChainError, operation
 from hdrio.cli.outputs import make_parent
-from hdrio.cli.registry import Chain, ChainError, operation
 
 
 def _check_merge_before(chain: Chain, name: str) -> None:
@@ -49,7 +49,7 @@ def _written(chain: Chain, path) -> None:
                 "samples of the solve",
            example="a.jpg b.jpg c.jpg --merge --plot-response response.png")
 def _plot_response(chain: Chain, name: str) -> None:
-    from hdrio.plots import plot_response
+    from hdrio.tools.plots import plot_response
 
     _written(chain, plot_response(_latest_merge(chain), _target(chain, name)))
 
@@ -58,7 +58,7 @@ def _plot_response(chain: Chain, name: str) -> None:
            help="map which bracket contributed most to each pixel of the latest --merge",
            example="a.jpg b.jpg c.jpg --merge --plot-contribution brackets.png")
 def _plot_contribution(chain: Chain, name: str) -> None:
-    from hdrio.plots import plot_contribution
+    from hdrio.tools.plots import plot_contribution
 
     _written(chain, plot_contribution(_latest_merge(chain), _target(chain, name)))
 
@@ -68,7 +68,7 @@ def _plot_contribution(chain: Chain, name: str) -> None:
            help="false-colour map of the top image's luminance in stops from its median, "
                 "with a legend", example="a.jpg b.jpg c.jpg --merge --plot-stops stops.png")
 def _plot_stops(chain: Chain, name: str) -> None:
-    from hdrio.plots import plot_stops
+    from hdrio.tools.plots import plot_stops
 
     image = chain.top()
     if image.display:
@@ -80,6 +80,6 @@ def _plot_stops(chain: Chain, name: str) -> None:
            help="the brackets of the latest --merge side by side, with their exposures",
            example="a.jpg b.jpg c.jpg --merge --contact-sheet brackets_sheet.png")
 def _contact_sheet(chain: Chain, name: str) -> None:
-    from hdrio.plots import contact_sheet
+    from hdrio.tools.plots import contact_sheet
 
     _written(chain, contact_sheet(_latest_merge(chain).stack, _target(chain, name)))

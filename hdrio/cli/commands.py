@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.cli.options import (
+from hdrio.cli.merge_arguments import (
     add_arguments,
     merge_options,
     settings_from_namespace,
@@ -18,9 +18,10 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
-from hdrio.merge_job import MergeOptions, MergeResult
-from hdrio.merge_output import saturation_rule
-from hdrio.pipeline import merge_files
+from hdrio.job.options import MergeOptions
+from hdrio.job.output import saturation_rule
+from hdrio.job.result import MergeResult
+from hdrio.job.run import merge_files
 from hdrio.tonemap import TONEMAP_METHODS
 
 
@@ -255,8 +256,8 @@ def add_demo(sub) -> None:
 
 def run_demo(args: argparse.Namespace) -> int:
     from hdrio import jit
-    from hdrio.demo import DEMO_EXPOSURES, oracle_radiance, write_demo_brackets
-    from hdrio.synthetic import radiance_error, well_exposed
+    from hdrio.tools.demo import DEMO_EXPOSURES, oracle_radiance, write_demo_brackets
+    from hdrio.tools.synthetic import radiance_error, well_exposed
 
     folder = Path(args.output_dir)
     folder.mkdir(parents=True, exist_ok=True)

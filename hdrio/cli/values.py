@@ -2,7 +2,7 @@
 
 Each raises ``ValueError`` (or ``KeyError`` from a method registry) with a message that
 the caller prefixes with the option and its arguments; the option table
-(:mod:`hdrio.cli.options`) and the chain's operations use them.
+(:mod:`hdrio.cli.merge_arguments`) and the chain's operations use them.
 """
 
 from __future__ import annotations
@@ -162,7 +162,7 @@ def sampling_methods():
 
 
 def weighting_methods():
-    from hdrio.merge.weighting import WEIGHTING_METHODS
+    from hdrio.radiometry.weighting import WEIGHTING_METHODS
     return WEIGHTING_METHODS
 
 

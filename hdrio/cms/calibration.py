@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hdrio.cms.luminance import luminance
 from hdrio.errors import HdrioError, InputError
+from hdrio.radiometry.luminance import luminance
 
 if TYPE_CHECKING:  # annotations only: importing the response solver costs a second
-    from hdrio.response.curve import CameraResponse
+    from hdrio.radiometry.curve import CameraResponse
     from hdrio.stack import ExposureStack
 
 DEFAULT_K = 12.5

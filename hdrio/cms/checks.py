@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cms.calibration import Region
-from hdrio.cms.luminance import normalised_primary_matrix
 from hdrio.errors import HdrioError, InputError
 from hdrio.parallel import on_threads, threads
+from hdrio.radiometry.luminance import normalised_primary_matrix
 
 REC709_D65 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLORCHECKER = "ColorChecker24 - After November 2014"

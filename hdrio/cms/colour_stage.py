@@ -19,7 +19,7 @@ from hdrio.cms.encoding import Encoding, resolve_encoding
 from hdrio.cms.whitebalance import apply_gains, neutral_gains
 from hdrio.errors import HdrioError
 from hdrio.io.write import Float2
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
 

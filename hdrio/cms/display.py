@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance
 from hdrio.cms.spaces import display_view
-from hdrio.tonemap.reinhard2002 import log_average_luminance
+from hdrio.radiometry.luminance import DEFAULT_SPACE, log_average_luminance, luminance
 
 MID_GREY = 0.18
 

@@ -12,7 +12,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from hdrio.errors import InputError
+from hdrio.radiometry.luminance import rgb_colourspace
 
 
 @dataclass(frozen=True)
@@ -83,3 +86,17 @@ def resolve_encoding(files: Sequence[str], metadata: Sequence[Mapping[str, objec
     if fallback:
         return encoding(fallback), "option"
     return ENCODINGS[DEFAULT_ENCODING], "default"
+
+
+def xyz_to_working(xyz: np.ndarray, space: str) -> np.ndarray:
+    """Convert linear CIE XYZ (D65) to the linear RGB working ``space``, float32.
+
+    Uses colour-science's matrix for the space, with a CAT02 adaptation when its white
+    is not D65. Out-of-gamut colours come out negative, as they should in scene-linear.
+    """
+    import colour
+
+    d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+    rgb = colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), rgb_colourspace(space), d65,
+                            chromatic_adaptation_transform="CAT02")
+    return np.asarray(rgb, dtype=np.float32)

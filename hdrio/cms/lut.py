@@ -18,8 +18,8 @@ import numpy as np
 
 from hdrio.cms.encoding import DEFAULT_ENCODING, ENCODINGS, Encoding
 from hdrio.io.write import OutputError, write_text
-from hdrio.response.curve import CameraResponse
-from hdrio.response.stored import response_from_header
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.saved_response import response_from_header
 
 
 def response_table(response: CameraResponse, levels: int | None = None) -> np.ndarray:
@@ -34,7 +34,7 @@ def recorded_linearisation(path: str | Path, header: Mapping[str, object]
                            ) -> tuple[np.ndarray, Encoding]:
     """The ``(levels, 3)`` linearisation table and input encoding recorded by hdrio merge.
 
-    The response comes from :func:`hdrio.response.stored.response_from_header`, read at
+    The response comes from :func:`hdrio.radiometry.saved_response.response_from_header`, read at
     the levels it was stored with. Raises :class:`InputError` naming ``path`` when the
     header has no hdrio response.
     """

@@ -234,7 +234,7 @@ def chromaticities(name: str, config: str | os.PathLike[str] | None = None
     From colour-science for known interop IDs; otherwise derived from the config's matrix
     to ACES2065-1 (primaries and white of the unit RGB vectors under the ACES white).
     """
-    from hdrio.cms.luminance import rgb_chromaticities
+    from hdrio.radiometry.luminance import rgb_chromaticities
 
     known = colour_science_name(name, config)
     if known is not None:
@@ -245,7 +245,7 @@ def chromaticities(name: str, config: str | os.PathLike[str] | None = None
 def derived_chromaticities(name: str, config: str | os.PathLike[str] | None = None
                            ) -> tuple[float, ...]:
     """Chromaticities of ``name`` from the config's matrix to ACES2065-1 (see module doc)."""
-    from hdrio.cms.luminance import normalised_primary_matrix
+    from hdrio.radiometry.luminance import normalised_primary_matrix
 
     matrix = rgb_to_reference_matrix(name, config)
     if matrix is None:

@@ -163,19 +163,3 @@ def read_raw_set(paths: Sequence[str | Path], white_balance: Sequence[float] | N
 def is_raw_stack(stack) -> bool:
     """Whether every frame of ``stack`` was decoded here (linear XYZ codes)."""
     return bool(stack.metadata) and all(m.get(RAW_SPACE) == "XYZ" for m in stack.metadata)
-
-
-def xyz_to_working(xyz: np.ndarray, space: str) -> np.ndarray:
-    """Convert linear CIE XYZ (D65) to the linear RGB working ``space``, float32.
-
-    Uses colour-science's matrix for the space, with a CAT02 adaptation when its white
-    is not D65. Out-of-gamut colours come out negative, as they should in scene-linear.
-    """
-    import colour
-
-    from hdrio.cms.luminance import rgb_colourspace
-
-    d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
-    rgb = colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), rgb_colourspace(space), d65,
-                            chromatic_adaptation_transform="CAT02")
-    return np.asarray(rgb, dtype=np.float32)

@@ -14,6 +14,7 @@ to ``HDRIO_TMPDIR``, else the system's temporary folder.
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 import tempfile
@@ -21,6 +22,9 @@ import tempfile
 import numpy as np
 
 DEFAULT_BUDGET_MB = 256
+
+CANDIDATE_LIMIT = 2**14
+"""Pixels of the regular grid the response's sampler and the noise fit read (at most)."""
 
 
 def budget_bytes() -> int:
@@ -106,3 +110,11 @@ def gather_pixels(codes: np.ndarray, indices: np.ndarray) -> np.ndarray:
         out[j] = codes[j].reshape(height * width, channels)[indices]
         release(codes, j)
     return out
+
+
+def candidate_stride(height: int, width: int, limit: int = CANDIDATE_LIMIT) -> int:
+    """The smallest grid stride that leaves at most ``limit`` pixels of ``height x width``."""
+    stride = max(1, math.ceil(math.sqrt(height * width / limit)))
+    while -(-height // stride) * -(-width // stride) > limit:
+        stride += 1
+    return stride

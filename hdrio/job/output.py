@@ -11,12 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from hdrio import __version__
-from hdrio.cms.luminance import rgb_chromaticities
-from hdrio.cms.stage import colour_attributes, output_radiance
+from hdrio.cms.colour_stage import colour_attributes, output_radiance
 from hdrio.io.write import HALF_MAX, write_exr
-from hdrio.merge.debevec1997 import MergeStatistics, clipped_everywhere_mask
-from hdrio.merge.estimators import MERGE_METHODS, merge_domain
-from hdrio.merge_job import MergeResult
+from hdrio.job.result import MergeResult
+from hdrio.merge.weighted_mean import MergeStatistics, clipped_everywhere_mask
+from hdrio.radiometry.luminance import rgb_chromaticities
 from hdrio.stack import ExposureStack
 
 
@@ -52,8 +51,8 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:sampling": options.sampling,
         "hdrio:samples": int(response.parameters.get("samples", 0)),
         "hdrio:seed": int(options.seed),
-        "hdrio:merge": MERGE_METHODS.canonical(options.merge),
-        "hdrio:mergeDomain": merge_domain(options.merge),
+        "hdrio:merge": result.plan.estimator.name,
+        "hdrio:mergeDomain": result.plan.estimator.domain,
         "hdrio:saturation": options.saturation,
         "hdrio:clippedFraction": result.statistics.clipped_fraction,
         "hdrio:highlights": options.highlights,

@@ -1,9 +1,13 @@
-"""Exposure merging (radiance maps from brackets and a camera response)."""
+"""Exposure merging: brackets and a camera response in, a radiance map out.
 
-from hdrio.merge.debevec1997 import MergeStatistics, merge_brackets
-from hdrio.merge.estimators import MERGE_METHODS, merge_weights
-from hdrio.merge.noise import NoiseModel, fit_noise, observation_variance
-from hdrio.merge.weighting import WEIGHTING_METHODS, weights_table
+The fused kernel (:mod:`~hdrio.merge.kernel`) behind one weighted mean
+(:mod:`~hdrio.merge.weighted_mean`) that every estimator shares, the merge functions by
+estimator name (:mod:`~hdrio.merge.methods`), the saturation policy, highlights, masked
+re-merges (deghosting, exclusions), ND filters and exposures checked against the data.
+The tables they read (curve, noise, weights) are :mod:`hdrio.radiometry`'s.
+"""
 
-__all__ = ["MERGE_METHODS", "WEIGHTING_METHODS", "MergeStatistics", "NoiseModel", "fit_noise",
-           "merge_brackets", "merge_weights", "observation_variance", "weights_table"]
+from hdrio.merge.methods import MERGE_METHODS
+from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
+
+__all__ = ["MERGE_METHODS", "MergeStatistics", "merge_brackets"]

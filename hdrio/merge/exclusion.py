@@ -15,9 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.ndimage
 
-from hdrio.merge.debevec1997 import MergeStatistics, merge_tables
 from hdrio.merge.masked import remerge_masked
-from hdrio.response.curve import CameraResponse
+from hdrio.merge.weighted_mean import MergeStatistics
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.tables import merge_tables
 
 
 def colour_exclusion(codes: np.ndarray, colour: Sequence[int] | None) -> np.ndarray | None:
@@ -55,7 +56,7 @@ def pixel_keep(excluded: np.ndarray, motion_keep: np.ndarray | None, cell: int) 
 
 
 def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraResponse,
-                     radiance: np.ndarray, excluded: np.ndarray,
+                     radiance: np.ndarray, excluded: np.ndarray, *,
                      motion_keep: np.ndarray | None, cell: int, weights: np.ndarray,
                      domain: str, per_channel: bool) -> np.ndarray:
     """Re-merge, in place in ``radiance`` ``(H, W, C)``, every pixel some bracket is
@@ -70,7 +71,7 @@ def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraR
     motion_keep, cell
         The deghosting's keep weights on cells of ``cell`` pixels, or ``None``.
     weights, domain, per_channel
-        The merge's weights (:func:`hdrio.merge.estimators.effective_weights`), domain
+        The merge's weights (:meth:`hdrio.radiometry.estimators.Estimator.weight_tables`), domain
         and saturation policy.
 
     Returns

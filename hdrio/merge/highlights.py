@@ -1,7 +1,7 @@
 """Highlight reconstruction: pixels clipped in every bracket (``--highlights``).
 
 A pixel with a channel at or above its limit even in the shortest bracket
-(:func:`hdrio.merge.debevec1997.clipped_everywhere_mask`) has no measurement of that
+(:func:`hdrio.merge.weighted_mean.clipped_everywhere_mask`) has no measurement of that
 channel, only a lower bound. ``clip`` (the default) leaves the merge's value: the
 channel's own lower bound per channel, or a neutral lower bound (every channel the
 largest of the shortest bracket's estimates) under the pixel rule or where every channel
@@ -168,7 +168,7 @@ def reconstruct_highlights(radiance: np.ndarray, shortest: np.ndarray, limits,
         The shortest bracket's codes.
     limits : sequence of int, (C,)
         The first code of each channel the saturation policy drops
-        (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`).
+        (:attr:`hdrio.merge.weighted_mean.MergeStatistics.limits`).
     estimates : ndarray, (code_max + 1, C)
         The shortest bracket's radiance estimate of each code, ``f^-1(z) / dt`` (relative
         units): the measurement of a channel below its limit.

@@ -6,7 +6,7 @@ The brackets are put in order of brightness: every pixel's code grows with expos
 the longer of two brackets has the higher codes at every percentile (which holds when
 the brackets are not registered, as scans and hand-held shots are not;
 :func:`brightness_order`). Their ratios are measured, as with metadata
-(:func:`hdrio.merge.exposures.fit_log_exposures`: medians of ``g(z_k) - g(z_j)`` over
+(:func:`hdrio.merge.exposure_check.fit_log_exposures`: medians of ``g(z_k) - g(z_j)`` over
 pixels well exposed in both), first through a *starting response*, the standard curve of
 the input encoding (:func:`starting_response`: sRGB's for 8-bit, linear for 16-bit and
 RAW), then through the response solved with them, iterated (Mitsunaga & Nayar 1999).
@@ -41,10 +41,9 @@ from hdrio.errors import InputError
 from hdrio.io.brackets import PLACEHOLDERS
 from hdrio.io.exposure import exposure_from_exif, relative_exif_exposures
 from hdrio.io.staging import strided_copy
-from hdrio.merge.exposures import WARN_STOPS, ExposureCheck, exposures_from_data
-from hdrio.merge.exposures import fit_log_exposures as fit
-from hdrio.response.curve import CameraResponse
-from hdrio.response.linear import linear_response
+from hdrio.merge.exposure_check import WARN_STOPS, ExposureCheck, exposures_from_data
+from hdrio.merge.exposure_check import fit_log_exposures as fit
+from hdrio.radiometry.curve import CameraResponse, linear_response
 from hdrio.skips import classify
 from hdrio.stack import ExposureStack
 

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.merge.exposures import MAX_PIXELS, MIN_OVERLAP, WELL_EXPOSED_CODES
-from hdrio.response.curve import CameraResponse
+from hdrio.merge.exposure_check import MAX_PIXELS, MIN_OVERLAP, WELL_EXPOSED_CODES
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
 

@@ -6,7 +6,7 @@ clipped, every output channel of that pixel is wrong, and most of them are below
 code: dropping only the codes at ``Z_max`` (``channel``) keeps those biased observations
 and gives partly clipped highlights a false hue (the orange and yellow-green bands at a
 clipped cloud's edge). On brackets rendered through such a camera
-(:func:`hdrio.synthetic.render_camera_brackets`: the 5D Mark II's matrix) the hue error
+(:func:`hdrio.tools.synthetic.render_camera_brackets`: the 5D Mark II's matrix) the hue error
 on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 ``auto`` (the default)
@@ -40,8 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.merge.noise import NoiseModel, noise_grid
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel, noise_grid
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")
 
@@ -193,8 +193,7 @@ def clip_interior(codes: np.ndarray, limits: np.ndarray, limit: int = MIXING_GRI
     Only the partly clipped pixels' neighbours are read, in that one bracket; ``grid``
     is ``noise_grid(codes, limit)`` when already read.
     """
-    from hdrio.io.staging import gather_pixels
-    from hdrio.response.sampling import candidate_stride
+    from hdrio.io.staging import candidate_stride, gather_pixels
 
     count, height, width, channels = codes.shape
     stride = candidate_stride(height, width, limit)

@@ -1,7 +1,7 @@
 """Per-pixel uncertainty: the predicted relative standard deviation of the merged radiance.
 
 For a weighted mean ``E = sum_j w_j x_j / sum_j w_j`` of independent estimates with
-variances ``v_j`` (the noise model, :mod:`hdrio.merge.noise`),
+variances ``v_j`` (the noise model, :mod:`hdrio.radiometry.noise`),
 
     var(E) = sum_j w_j^2 v_j / (sum_j w_j)^2
 
@@ -24,10 +24,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hdrio.merge.debevec1997 import estimate_tables
-from hdrio.merge.noise import NoiseModel, observation_variance
 from hdrio.parallel import threads
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel, observation_variance
+from hdrio.radiometry.tables import estimate_tables
 from hdrio.stack import ExposureStack
 
 _KERNEL = dict(cache=True, nogil=True, error_model="numpy")

@@ -45,11 +45,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from hdrio.io.staging import is_staged, release
-from hdrio.merge.kernel import MAX_BRACKETS, PAIR_LEVELS, merge_kernel, pair_tables
+from hdrio.merge.kernel import MAX_BRACKETS, KernelTables, merge_kernel
+from hdrio.merge.row_sums import PAIR_LEVELS, pair_tables
 from hdrio.merge.saturation import SATURATION_POLICIES
-from hdrio.merge.weighting import weights_table
-from hdrio.response.curve import CameraResponse
-from hdrio.stack import ExposureStack, exposure_columns
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.tables import merge_tables
+from hdrio.stack import ExposureStack
 
 
 @dataclass(frozen=True)
@@ -84,18 +85,9 @@ MERGE_BAND_ROWS = 128
 released after it: 128 rows of seven 24 MP brackets hold 16 MB)."""
 
 
-def estimate_tables(response: CameraResponse, exposures: np.ndarray, domain: str) -> np.ndarray:
-    """Per-bracket estimates ``(P, code_max + 1, C)``: ``g(z) - ln dt`` or ``f^-1(z) / dt``."""
-    exposures = exposure_columns(exposures)[:, None, :]  # (P, 1, 1 or C)
-    if domain == "log":
-        return response.log_inverse[None] - np.log(exposures)
-    with np.errstate(over="ignore"):
-        return np.exp(response.log_inverse)[None] / exposures
-
-
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
-                   saturation: str = "channel", early_stop: bool = True,
+                   saturation: str = "channel", *, early_stop: bool = True,
                    weights: np.ndarray | None = None, limits: np.ndarray | None = None,
                    pixel_rule: bool = False) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
@@ -109,7 +101,7 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
     result to float32 rounding). ``weights``, when given, are per-bracket weights
     ``w_j(z)`` ``(P, C, code_max + 1)`` in place of ``weighting``'s ``w(z)`` (the
-    estimators of :mod:`hdrio.merge.estimators`).
+    estimators of :mod:`hdrio.radiometry.estimators`).
 
     Codes staged in a file (:mod:`hdrio.io.staging`) are merged a band of rows at a time,
     each band's pages given back once merged.
@@ -145,16 +137,16 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
         pairs = pair_tables(terms, limits)
     else:
         pairs = np.empty((0, channels, 1), np.complex64)  # the general path
-    terms = terms.astype(np.complex64)
+    tables = KernelTables(terms.astype(np.complex64), estimates, pairs, stack.code_max,
+                          limits, pixel_rule, domain == "log", early_stop)
     radiance = np.empty((height, width, channels), dtype=np.float32)
     counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
     codes = stack.codes.reshape(count, height, width * channels)  # a view (contiguous)
     band = MERGE_BAND_ROWS if is_staged(stack.codes) else height
     for top in range(0, height, band):
         bottom = min(height, top + band)
-        merge_kernel(codes, top, bottom, terms, estimates, pairs, stack.code_max,
-                     limits, pixel_rule, domain == "log", early_stop,
-                     radiance.reshape(height, width * channels), *counts)
+        merge_kernel(codes, top, bottom, tables, radiance.reshape(height, width * channels),
+                     counts)
         release(stack.codes, None, top, bottom)
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=int(counts[0].sum()),
@@ -170,29 +162,3 @@ def clipped_everywhere_mask(shortest: np.ndarray, limits) -> np.ndarray:
     gave a neutral lower bound (or, with the ``channel`` policy, a channel's own)."""
     limits = np.asarray(limits, dtype=np.int64)
     return np.any(shortest >= limits, axis=-1).astype(np.float32)
-
-
-def code_weights(response: CameraResponse, weighting: str) -> np.ndarray:
-    """``weighting``'s ``w(z)`` on the codes the solve supported, ``(1, C, levels)``."""
-    table = weights_table(weighting, response.code_max)[:, None] * response.supported
-    return np.ascontiguousarray(table.T)[None]
-
-
-def merge_tables(response: CameraResponse, exposures: np.ndarray, weighting: str,
-                 domain: str, weights: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's tables ``(P, C, levels)``: the terms ``w_j(z) x_j(z) + i w_j(z)``
-    (complex128: the numerator's term, the denominator's), with ``w(Z_max) = 0``, and
-    the estimates ``x_j(z)`` (float64).
-
-    ``weights`` ``(P, C, levels)``: per-bracket weights (the noise-aware estimators);
-    else ``weighting``'s ``w(z)``, the same for every bracket. Per channel, codes where
-    ``g`` is extrapolated (no weighted sample fell there) say little about radiance, so
-    they get no weight; the fallbacks still cover every pixel.
-    """
-    weights = code_weights(response, weighting) if weights is None else \
-        np.array(weights, dtype=np.float64)  # a copy: the end is zeroed below
-    weights[..., -1] = 0.0  # a saturated observation never counts (the kernel relies on it)
-    estimates = np.ascontiguousarray(
-        estimate_tables(response, exposures, domain).transpose(0, 2, 1))
-    return weights * estimates + 1j * weights, estimates

@@ -77,3 +77,19 @@ def monotone_non_decreasing(g: np.ndarray, anchor: int) -> np.ndarray:
     g[anchor:] = np.maximum.accumulate(g[anchor:])
     g[: anchor + 1] = np.minimum.accumulate(g[anchor::-1])[::-1]
     return g
+
+
+def linear_response(code_max: int, channels: int) -> CameraResponse:
+    """``g(z) = ln(z / z_mid)`` for codes ``0..code_max``, ``channels`` identical columns."""
+    z = np.arange(code_max + 1, dtype=np.float64)
+    z_mid = (code_max + 1) // 2
+    g = np.log(np.maximum(z, 0.5) / z_mid)
+    supported = np.broadcast_to((z > 0)[:, None], (code_max + 1, channels)).copy()
+    return CameraResponse(
+        log_inverse=np.repeat(g[:, None], channels, axis=1), code_max=code_max,
+        supported=supported, method="linear",
+        # The header stores g at 1024 levels at most; read back, a "linear" response is
+        # rebuilt exactly (see :mod:`hdrio.radiometry.saved_response`), so nothing is lost.
+        parameters={"smoothing": 0.0, "weighting": "n/a", "sampling": "n/a", "samples": 0,
+                    "levels": min(code_max + 1, 1024)},
+    )

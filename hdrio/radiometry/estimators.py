@@ -1,12 +1,14 @@
 """Merge estimators: how each bracket's estimate ``x_j`` of a pixel's radiance is weighted.
 
 Every estimator is a weighted mean ``E = sum_j w_j(Z_j) x_j / sum_j w_j(Z_j)`` computed by
-the one fused kernel (:func:`hdrio.merge.debevec1997.merge_brackets`), with the same
-saturation policy and fallbacks; they differ in the weights and the domain:
+the one fused kernel (:func:`hdrio.merge.weighted_mean.merge_brackets`), with the same
+saturation policy and fallbacks; they differ in the weights and the domain, which an
+:class:`Estimator` states once (:data:`ESTIMATORS`, by name; the merge functions of
+:data:`hdrio.merge.methods.MERGE_METHODS` and the job's plan read them):
 
 ``inverse-variance`` (the default; alias ``Granados2010``, ``noise-optimal``)
     Linear domain, ``w_j(z) = 1 / var(x_j | z)`` from the stack's own noise model
-    (:mod:`hdrio.merge.noise`): the minimum-variance unbiased combination of independent
+    (:mod:`hdrio.radiometry.noise`): the minimum-variance unbiased combination of independent
     estimates, which Granados et al. (2010) show reaches the Cramér-Rao bound of the
     raw-noise model with few frames. Observations within two of their own standard
     deviations of black or of saturation stay out (their noise was cut off there).
@@ -34,27 +36,16 @@ image stacks without camera calibration. ECCV 2020 Workshops.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
-from hdrio.merge.debevec1997 import (
-    MergeStatistics,
-    code_weights,
-    merge_brackets,
-)
-from hdrio.merge.noise import (
-    NoiseModel,
-    code_variance_floor,
-    fit_noise,
-    observation_variance,
-    usable_codes,
-)
-from hdrio.merge.saturation import policy_limits
-from hdrio.registry import MethodRegistry
-from hdrio.response.curve import CameraResponse
-from hdrio.stack import ExposureStack, exposure_columns
-
-NOISE_AWARE = ("inverse-variance", "Poisson")
-"""Estimators whose weights read the noise model."""
+from hdrio.method_registry import MethodRegistry
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel, observation_variance, usable_codes
+from hdrio.radiometry.tables import code_weights
+from hdrio.stack import exposure_columns
 
 
 def supported_range(response: CameraResponse) -> np.ndarray:
@@ -87,54 +78,53 @@ def weights_Poisson(response: CameraResponse, exposures, noise: NoiseModel) -> n
     return np.where(usable, exposure_columns(exposures)[:, :, None], 0.0)
 
 
-def merge_weights(method: str, response: CameraResponse, exposures,
-                  noise: NoiseModel | None) -> np.ndarray | None:
-    """The per-bracket weight tables of ``method``, or ``None`` for the code-weighted
-    merges (``log``, ``linear``), whose ``w(z)`` comes from ``--weighting``."""
-    canonical = MERGE_METHODS.canonical(method)
-    if canonical not in NOISE_AWARE:
-        return None
-    if noise is None:
-        raise ValueError(f"the {canonical} merge needs a noise model")
-    function = weights_inverse_variance if canonical == "inverse-variance" else weights_Poisson
-    return function(response, exposures, noise)
+NoiseWeights = Callable[[CameraResponse, np.ndarray, NoiseModel], np.ndarray]
 
 
-def effective_weights(method: str, response: CameraResponse, exposures, weighting: str,
+@dataclass(frozen=True)
+class Estimator:
+    """One merge estimator: its weights and the domain it averages in.
+
+    Attributes
+    ----------
+    name
+        Canonical name (``hdrio:merge`` in the header).
+    domain
+        ``log`` or ``linear``: where the weighted mean is taken.
+    noise_weights
+        Per-bracket weights from the noise model, ``(P, C, levels)``; ``None`` for the
+        code-weighted estimators, whose ``w(z)`` comes from ``--weighting``.
+    """
+
+    name: str
+    domain: str
+    noise_weights: NoiseWeights | None = None
+
+    @property
+    def needs_noise(self) -> bool:
+        """Whether the weights read the noise model (:mod:`hdrio.radiometry.noise`)."""
+        return self.noise_weights is not None
+
+    def weight_tables(self, response: CameraResponse, exposures, weighting: str,
                       noise: NoiseModel | None) -> np.ndarray:
-    """The weights ``method`` merges with, ``(P or 1, C, levels)``, zero at ``Z_max``."""
-    weights = merge_weights(method, response, exposures, noise)
-    weights = code_weights(response, weighting) if weights is None else weights.copy()
-    weights[..., -1] = 0.0
-    return weights
+        """The weights this estimator merges with, ``(P or 1, C, levels)``, zero at
+        ``Z_max``: the noise model's (``noise`` required) or ``weighting``'s ``w(z)``."""
+        if self.noise_weights is None:
+            weights = code_weights(response, weighting)
+        elif noise is None:
+            raise ValueError(f"the {self.name} merge needs a noise model")
+        else:
+            weights = self.noise_weights(response, exposures, noise)
+        weights[..., -1] = 0.0
+        return weights
 
 
-def merge_domain(method: str) -> str:
-    """``log`` or ``linear``: where ``method`` averages."""
-    return "log" if MERGE_METHODS.canonical(method) == "log" else "linear"
-
-
-def _merge(method: str):
-    def merge(stack: ExposureStack, response: CameraResponse, weighting: str = "Debevec1997",
-              saturation: str = "auto", early_stop: bool = True,
-              noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
-        if method in NOISE_AWARE and noise is None:
-            noise = fit_noise(stack.codes, stack.exposures, response,
-                              code_floor=code_variance_floor(stack.files))
-        weights = merge_weights(method, response, stack.channel_exposures, noise)
-        limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,
-                                           stack.exposures)
-        return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
-                              early_stop, weights, limits, pixel_rule)
-
-    merge.__name__ = f"merge_{method.replace('-', '_')}"
-    merge.__doc__ = (f"Merge ``stack`` with the ``{method}`` estimator (see "
-                     ":mod:`hdrio.merge.estimators`); ``noise`` is fitted when not given.")
-    return merge
-
-
-MERGE_METHODS: MethodRegistry = MethodRegistry(
-    "merge", {name: _merge(name) for name in ("inverse-variance", "Poisson", "log", "linear")},
+ESTIMATORS: MethodRegistry[Estimator] = MethodRegistry(
+    "merge",
+    {"inverse-variance": Estimator("inverse-variance", "linear", weights_inverse_variance),
+     "Poisson": Estimator("Poisson", "linear", weights_Poisson),
+     "log": Estimator("log", "log"),
+     "linear": Estimator("linear", "linear")},
     aliases={"Granados2010": "inverse-variance", "noise-optimal": "inverse-variance",
              "Hanji2020": "Poisson", "Debevec1997": "log", "tutorial": "log"},
 )

@@ -78,3 +78,16 @@ def rgb_chromaticities(space: str = DEFAULT_SPACE) -> tuple[float, ...]:
     primaries = np.asarray(colourspace.primaries, dtype=np.float64).reshape(-1)
     white = np.asarray(colourspace.whitepoint, dtype=np.float64)
     return tuple(float(v) for v in (*primaries, *white))
+
+
+DELTA = 1e-4
+"""Reinhard et al. (2002)'s ``delta`` in eq. 1: keeps black pixels out of ``ln 0``."""
+
+
+def log_average_luminance(L: np.ndarray, delta: float = DELTA) -> float:
+    """Reinhard et al. (2002) eq. 1, the scene's key: ``exp(mean(ln(delta + L)))`` over
+    luminance ``L`` (any shape), negative luminance counted as 0. The tone-mapping
+    operators (:mod:`hdrio.tonemap.reinhard2002`) and the OCIO display previews
+    (:mod:`hdrio.cms.display`) expose a scene by it."""
+    L = np.asarray(L, dtype=np.float64)
+    return float(np.exp(np.mean(np.log(delta + np.maximum(L, 0.0)))))

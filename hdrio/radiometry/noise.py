@@ -15,7 +15,7 @@ and into a radiance estimate ``x_j = X / dt_j``. Its variance is modelled as
 This is the model of Granados et al. (2010) and Aguerrebere et al. (2014) (shot + read
 noise of the raw signal) with the quantisation term of Mitsunaga & Nayar's analysis,
 stated for a camera whose response is only known through ``g = ln f^-1``. It is the one
-thing the merge's weights (:mod:`hdrio.merge.estimators`), the maximum-likelihood
+thing the merge's weights (:mod:`hdrio.radiometry.estimators`), the maximum-likelihood
 response (:mod:`hdrio.response.robertson2003`), the uncertainty layer and deghosting read.
 
 Fit (:func:`fit_noise`): for pixels seen unclipped in two neighbouring brackets, the two
@@ -46,9 +46,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hdrio.io.staging import strided_copy
-from hdrio.merge.grouped import group_edges, group_means, group_medians
-from hdrio.response.curve import CameraResponse
+from hdrio.io.staging import candidate_stride, strided_copy
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.grouped import group_edges, group_means, group_medians
 from hdrio.stack import exposure_columns
 
 
@@ -182,8 +182,6 @@ def usable_codes(response: CameraResponse, noise: NoiseModel) -> np.ndarray:
 
 def noise_grid(codes: np.ndarray, limit: int = NOISE_GRID_LIMIT) -> np.ndarray:
     """A regular grid of at most ``limit`` pixels of every bracket, ``(P, n, C)``."""
-    from hdrio.response.sampling import candidate_stride
-
     count, height, width, channels = codes.shape
     grid = strided_copy(codes, candidate_stride(height, width, limit))
     return grid.reshape(count, -1, channels)
@@ -227,7 +225,7 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
             difference = xl - xs
             radiance = 0.5 * (xs + xl)
             bins = np.minimum(zs * _BINS // (code_max + 1), _BINS - 1)
-            # Every bin's robust spread and means at once (hdrio.merge.grouped).
+            # Every bin's robust spread and means at once (hdrio.radiometry.grouped).
             centre = group_medians(difference, bins, _BINS)
             spread = _MAD_TO_SIGMA * group_medians(np.abs(difference - centre[bins]), bins,
                                                    _BINS)

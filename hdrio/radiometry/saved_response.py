@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.errors import InputError
-from hdrio.response.curve import CameraResponse
-from hdrio.response.linear import linear_response
+from hdrio.radiometry.curve import CameraResponse, linear_response
 
 _RANGE = re.compile(r"(\w+) (\d+)-(\d+)")
 
@@ -58,7 +57,7 @@ def _number(header: dict, name: str, default: float) -> float:
 
 
 def response_from_header(header: dict, source: str = "<header>") -> CameraResponse:
-    """Rebuild the :class:`CameraResponse` written by :func:`hdrio.merge_output.exr_attributes`.
+    """Rebuild the :class:`CameraResponse` written by :func:`hdrio.job.output.exr_attributes`.
 
     Level ``k`` of the stored curves is code ``k * codeMax / (levels - 1)``; codes between
     levels are interpolated linearly in ``g`` (natural-log units). Raises

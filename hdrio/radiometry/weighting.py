@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.registry import MethodRegistry
+from hdrio.method_registry import MethodRegistry
 
 
 def weighting_tutorial_hat(z, z_min: float = 0, z_max: float = 255) -> np.ndarray:

@@ -1,7 +1,6 @@
 """Camera response recovery: one module per published method, one registry."""
 
-from hdrio.registry import MethodRegistry
-from hdrio.response.curve import CameraResponse
+from hdrio.method_registry import MethodRegistry
 from hdrio.response.debevec1997 import g_solve_Debevec1997, response_Debevec1997
 from hdrio.response.linear import response_linear
 from hdrio.response.robertson2003 import response_Robertson2003
@@ -13,5 +12,5 @@ RESPONSE_METHODS: MethodRegistry = MethodRegistry(
     aliases={"debevec": "Debevec1997", "robertson": "Robertson2003"},
 )
 
-__all__ = ["RESPONSE_METHODS", "SAMPLING_METHODS", "CameraResponse", "g_solve_Debevec1997",
+__all__ = ["RESPONSE_METHODS", "SAMPLING_METHODS", "g_solve_Debevec1997",
            "response_Debevec1997", "response_Robertson2003", "response_linear"]

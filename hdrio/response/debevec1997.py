@@ -38,8 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from hdrio.errors import ResponseSolveError
-from hdrio.merge.weighting import weighting_tutorial_hat, weights_table
-from hdrio.response.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
+from hdrio.radiometry.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
+from hdrio.radiometry.weighting import weighting_tutorial_hat, weights_table
 from hdrio.response.normal_equations import (
     Debevec1997Rows,
     IllConditioned,
@@ -191,12 +191,12 @@ def g_solve_Debevec1997(Z, log_exposures, smoothing: float = DEFAULT_SMOOTHING,
     return g, log_e
 
 
-def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
+def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                          weighting: str = "Debevec1997", sampling: str = "stratified",
                          samples: int | None = None, exclude: np.ndarray | None = None,
                          seed: int = 0, levels: int | None = None, monotone: bool = True,
                          solve_identical_once: bool = True):
-    """Recover a :class:`~hdrio.response.curve.CameraResponse` from an exposure stack.
+    """Recover a :class:`~hdrio.radiometry.curve.CameraResponse` from an exposure stack.
 
     Parameters
     ----------
@@ -217,7 +217,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING,
           ``(256 / n)^2`` and their count grows as ``n / 256``, so this keeps the
           smoothing of a given curve independent of the level count.
     weighting
-        A name in :data:`hdrio.merge.weighting.WEIGHTING_METHODS`.
+        A name in :data:`hdrio.radiometry.weighting.WEIGHTING_METHODS`.
     sampling, samples, exclude, seed
         Pixel selection (see :mod:`hdrio.response.sampling`); ``exclude`` is an
         ``(H, W)`` mask of pixels never to sample.

@@ -8,9 +8,7 @@ is marked unsupported, so the merge gives it no weight.
 
 from __future__ import annotations
 
-import numpy as np
-
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse, linear_response
 
 
 def response_linear(stack, **_ignored) -> CameraResponse:
@@ -31,19 +29,3 @@ def response_linear(stack, **_ignored) -> CameraResponse:
         ``g(z) = ln(z / z_mid)`` per channel, in natural-log units of relative exposure.
     """
     return linear_response(int(stack.code_max), int(stack.codes.shape[-1]))
-
-
-def linear_response(code_max: int, channels: int) -> CameraResponse:
-    """``g(z) = ln(z / z_mid)`` for codes ``0..code_max``, ``channels`` identical columns."""
-    z = np.arange(code_max + 1, dtype=np.float64)
-    z_mid = (code_max + 1) // 2
-    g = np.log(np.maximum(z, 0.5) / z_mid)
-    supported = np.broadcast_to((z > 0)[:, None], (code_max + 1, channels)).copy()
-    return CameraResponse(
-        log_inverse=np.repeat(g[:, None], channels, axis=1), code_max=code_max,
-        supported=supported, method="linear",
-        # The header stores g at 1024 levels at most; read back, a "linear" response is
-        # rebuilt exactly (see hdrio.response.stored), so nothing is lost.
-        parameters={"smoothing": 0.0, "weighting": "n/a", "sampling": "n/a", "samples": 0,
-                    "levels": min(code_max + 1, 1024)},
-    )

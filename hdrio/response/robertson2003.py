@@ -2,7 +2,7 @@
 refining Debevec's solution with the stack's noise model (``--response Robertson2003``).
 
 Each observation ``z_ij`` (pixel ``i``, bracket ``j``) is modelled as ``f^-1(z_ij) =
-dt_j x_i + noise``, with the variance of :mod:`hdrio.merge.noise` (shot, read and code
+dt_j x_i + noise``, with the variance of :mod:`hdrio.radiometry.noise` (shot, read and code
 noise). Maximising the likelihood alternates two closed-form steps (the paper's
 Gauss-Seidel relaxation):
 
@@ -16,7 +16,7 @@ It starts from :func:`~hdrio.response.debevec1997.response_Debevec1997` (the tut
 objective) and runs on the noise fit's grid of pixels (up to 16384 per bracket, where
 Debevec's solve takes 1000): "refine the Debevec solution on many more pixels with the
 same noise model". Observations within two standard deviations of black or saturation
-stay out (:func:`hdrio.merge.noise.usable_codes`), as in the merge. ``g(z_mid) = 0``,
+stay out (:func:`hdrio.radiometry.noise.usable_codes`), as in the merge. ``g(z_mid) = 0``,
 monotone, and codes with too few observations keep Debevec's values.
 
 It is not the default: on the truth harness's stacks it measures worse than Debevec's
@@ -40,7 +40,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hdrio.response.curve import CameraResponse, monotone_non_decreasing
+from hdrio.radiometry.curve import CameraResponse, monotone_non_decreasing
 from hdrio.response.debevec1997 import DEFAULT_SMOOTHING, response_Debevec1997
 from hdrio.stack import exposure_columns
 
@@ -57,7 +57,7 @@ MIN_OBSERVATIONS = 8
 """A code needs this many usable observations to be re-estimated."""
 
 
-def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING,
+def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                            weighting: str = "Debevec1997", sampling: str = "stratified",
                            samples: int | None = None, exclude: np.ndarray | None = None,
                            seed: int = 0, levels: int | None = None, monotone: bool = True,
@@ -70,18 +70,20 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING,
     ``exclude`` (``(H, W)``, pixels never to sample) also keeps pixels out of the
     refinement. ``parameters["iterations"]`` says how many alternations ran.
     """
-    # Imported here: hdrio.merge.noise imports this package's curve module.
-    from hdrio.merge.noise import (
+    # Imported here: hdrio.radiometry.noise imports this package's curve module.
+    from hdrio.io.staging import candidate_stride
+    from hdrio.radiometry.noise import (
         code_variance_floor,
         fit_noise,
         noise_grid,
         observation_variance,
         usable_codes,
     )
-    from hdrio.response.sampling import candidate_stride
 
-    start = response_Debevec1997(stack, smoothing, weighting, sampling, samples, exclude,
-                                 seed, levels, monotone, solve_identical_once)
+    start = response_Debevec1997(stack, smoothing, weighting=weighting, sampling=sampling,
+                                 samples=samples, exclude=exclude, seed=seed, levels=levels,
+                                 monotone=monotone,
+                                 solve_identical_once=solve_identical_once)
     grid = noise_grid(stack.codes)  # (P, n, C)
     noise = fit_noise(stack.codes, stack.exposures, start, grid=grid,
                       code_floor=code_variance_floor(stack.files))

@@ -18,8 +18,9 @@ Two strategies, both returning flat (row-major) pixel indices into an ``H x W`` 
     Pixels in an exclusion mask (registration borders, say) are never drawn.
 
     Candidates lie on a regular grid ``codes[:, ::stride, ::stride]`` of at most
-    :data:`CANDIDATE_LIMIT` (2^14) pixels, the stride following from the image size (39
-    at 6000 x 4000: a 103 x 154 grid), and the sampler reads nothing else of the codes.
+    :data:`hdrio.io.staging.CANDIDATE_LIMIT` (2^14) pixels, the stride following from the
+    image size (39 at 6000 x 4000: a 103 x 154 grid), and the sampler reads nothing else
+    of the codes.
     The grid used to hold a million candidates, and sampling 24 MP took 0.7 s; at 2^14
     it takes about 2.5 ms, mostly the one read of the grid's memory. Coarser grids
     did not cost accuracy: on the speed benchmark's scene (7 brackets 2 EV apart) the
@@ -38,12 +39,10 @@ import math
 
 import numpy as np
 
-from hdrio.io.staging import gather_pixels, strided_copy
-from hdrio.registry import MethodRegistry
+from hdrio.io.staging import candidate_stride, gather_pixels, strided_copy
+from hdrio.method_registry import MethodRegistry
 
 DEFAULT_SAMPLES = 1000
-CANDIDATE_LIMIT = 2**14
-"""The stratified sampler's candidates: at most this many pixels, on a regular grid."""
 _BINS = 32
 
 
@@ -71,12 +70,6 @@ def samples_tutorial(codes: np.ndarray, code_max: int, n_levels: int | None = No
     return rows * width + cols
 
 
-def candidate_stride(height: int, width: int, limit: int = CANDIDATE_LIMIT) -> int:
-    """The smallest grid stride that leaves at most ``limit`` pixels of ``height x width``."""
-    stride = max(1, math.ceil(math.sqrt(height * width / limit)))
-    while -(-height // stride) * -(-width // stride) > limit:
-        stride += 1
-    return stride
 
 
 def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAULT_SAMPLES,
@@ -85,7 +78,7 @@ def samples_stratified(codes: np.ndarray, code_max: int, n_samples: int = DEFAUL
     """Indices covering every bracket's code range evenly (see module docstring).
 
     Reads only the candidate grid ``codes[:, ::stride, ::stride]`` (and the same grid of
-    ``exclude``): at most :data:`CANDIDATE_LIMIT` pixels, whatever the image size.
+    ``exclude``): at most :data:`hdrio.io.staging.CANDIDATE_LIMIT` pixels, whatever the image size.
     """
     count, height, width, channels = codes.shape
     stride = candidate_stride(height, width)

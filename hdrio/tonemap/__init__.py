@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.registry import MethodRegistry
+from hdrio.method_registry import MethodRegistry
 from hdrio.tonemap.reinhard2002 import (
     tonemap_Reinhard2002_global,
     tonemap_Reinhard2002_global_tutorial,

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance
 from hdrio.numbers import check_tonemap_parameters
+from hdrio.radiometry.luminance import DEFAULT_SPACE, DELTA, log_average_luminance, luminance
 from hdrio.tonemap import TONEMAP_METHODS, encode_sRGB
-from hdrio.tonemap.reinhard2002 import DELTA, log_average_luminance
 
 
 def render_preview(radiance: np.ndarray, operator: str = "reinhard-global",

@@ -4,7 +4,9 @@ Both take linear RGB (any positive scale: relative or absolute radiance) and ret
 display-linear RGB in [0, 1] (encode for a display before writing 8-bit files).
 
 Paper variants (``tonemap_Reinhard2002_global``, ``tonemap_Reinhard2002_local``)
-    * log-average key ``L_bar = exp(mean(ln(delta + L)))``, ``delta = 1e-4`` (eq. 1)
+    * log-average key ``L_bar = exp(mean(ln(delta + L)))``, ``delta = 1e-4`` (eq. 1;
+      :func:`hdrio.radiometry.luminance.log_average_luminance`, shared with the OCIO
+      display previews)
     * scaling ``L_m = a / L_bar * L`` (eq. 2); global ``L_d = L_m / (1 + L_m)`` (eq. 3), or
       with a white point ``L_d = L_m (1 + L_m / L_white^2) / (1 + L_m)`` (eq. 4)
     * local: Gaussian blurs ``V1(s)`` of ``L_m`` at ``s = 1.6^i`` (i = 0..8), ``sigma = s /
@@ -40,9 +42,8 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance_weights
+from hdrio.radiometry.luminance import DEFAULT_SPACE, DELTA, luminance_weights
 
-DELTA = 1e-4
 SCALE_RATIO = 1.6
 SCALES = 8
 ALPHA_1 = 1.0 / (2.0 * math.sqrt(2.0))
@@ -55,13 +56,6 @@ def _pixels(rgb: np.ndarray, operator: str) -> np.ndarray:
     if rgb.ndim == 0 or rgb.shape[-1] != 3:
         raise ValueError(f"{operator} takes RGB pixels (..., 3), got shape {rgb.shape}")
     return rgb
-
-
-def log_average_luminance(L: np.ndarray, delta: float = DELTA) -> float:
-    """Eq. 1, the scene's key: ``exp(mean(ln(delta + L)))`` over luminance ``L`` (any
-    shape), negative luminance counted as 0."""
-    L = np.asarray(L, dtype=np.float64)
-    return float(np.exp(np.mean(np.log(delta + np.maximum(L, 0.0)))))
 
 
 def _scene_key_scale(flat: np.ndarray, weights: np.ndarray, key: float, delta: float

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.io.write import write_image
-from hdrio.merge.estimators import MERGE_METHODS
-from hdrio.merge.noise import QUANTISATION, NoiseModel
+from hdrio.merge.methods import MERGE_METHODS
+from hdrio.radiometry.noise import QUANTISATION, NoiseModel
 from hdrio.stack import ExposureStack
-from hdrio.synthetic import (
+from hdrio.tools.synthetic import (
     DEFAULT_READ_NOISE,
     DEFAULT_SHOT_NOISE,
     demo_scene,

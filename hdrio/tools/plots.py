@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance
 from hdrio.errors import HdrioError
 from hdrio.io.write import write_image
-from hdrio.merge import weights_table
+from hdrio.radiometry.luminance import DEFAULT_SPACE, luminance
+from hdrio.radiometry.weighting import weights_table
 
 _CHANNEL_COLOURS = ("tab:red", "tab:green", "tab:blue")
 

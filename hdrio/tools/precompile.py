@@ -1,4 +1,4 @@
-"""``python -m hdrio.precompile STAGE ...``: compile a job's kernels into numba's disk
+"""``python -m hdrio.tools.precompile STAGE ...``: compile a job's kernels into numba's disk
 cache in a process of their own, started by :func:`hdrio.jit.compile_ahead` on a first
 run. Each stage runs hdrio's own entry point on a tiny input, so the kernels compile for
 the very types the job passes them. Nothing imports this module."""
@@ -16,9 +16,9 @@ from hdrio.parallel import die_with_parent
 
 def _compile_merge() -> None:
     """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's)."""
-    from hdrio.merge.debevec1997 import merge_brackets
+    from hdrio.merge.weighted_mean import merge_brackets
     from hdrio.stack import ExposureStack
-    from hdrio.synthetic import gamma_inverse_response
+    from hdrio.tools.synthetic import gamma_inverse_response
 
     codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
     stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
@@ -28,9 +28,9 @@ def _compile_merge() -> None:
 def _compile_motion() -> None:
     """Alignment's still check and deghosting's test of 8-bit RGB brackets, through the
     pipeline's own steps on a small still stack (what ``auto`` runs on most stacks)."""
-    from hdrio.align.stage import align_step, deghost_step
+    from hdrio.align.motion import align_step, deghost_step
     from hdrio.stack import ExposureStack
-    from hdrio.synthetic import demo_scene, gamma_inverse_response, render_brackets
+    from hdrio.tools.synthetic import demo_scene, gamma_inverse_response, render_brackets
 
     times = [1 / 256, 1 / 16, 1.0]
     stack = ExposureStack.from_arrays(render_brackets(demo_scene(96, 128), times), times)
@@ -46,7 +46,7 @@ def _compile_preview(operator: str) -> None:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.precompile [nice=N] merge motion preview=OPERATOR``: compile
+    """``python -m hdrio.tools.precompile [nice=N] merge motion preview=OPERATOR``: compile
     those kernels in that order (at niceness ``N`` when given; and stop when the process
     that started this one stops), printing each stage's name (``merge``, ``motion``,
     ``preview``) once its kernels are in the cache."""

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.skips import WELL_EXPOSED
 
 Response = Callable[[np.ndarray], np.ndarray]
@@ -174,7 +174,7 @@ def camera_matrices(xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA
 
 
 def render_camera_brackets(radiance: np.ndarray, exposures, response: Response = gamma_response,
-                           mixing: bool = True, bit_depth: int = 8,
+                           *, mixing: bool = True, bit_depth: int = 8,
                            shot_noise: float = DEFAULT_SHOT_NOISE,
                            read_noise: float = DEFAULT_READ_NOISE, seed: int = 0,
                            xyz_to_camera: np.ndarray = CANON_5D_MARK_II_XYZ_TO_CAMERA,

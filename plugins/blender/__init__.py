@@ -1,6 +1,6 @@
 """hdrio for Blender: merge bracketed exposures and tone-map them in the compositor.
 
-A thin front end over hdrio's public API (``hdrio.pipeline`` and the core modules):
+A thin front end over hdrio's public API (``hdrio.job.run`` and the core modules):
 
 * ``HDR Merge`` node: hdrio's default merge in native compositor nodes, its tables baked
   into RGB Curves (``nodes.py``, ``merge_graph.py``, ``baking.py``);

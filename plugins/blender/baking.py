@@ -1,12 +1,12 @@
 """Bake hdrio's merge into the tables the compositor's RGB Curves nodes hold.
 
 No ``bpy`` here: this module turns a :class:`hdrio.CameraResponse`, the brackets'
-exposures and hdrio's :class:`~hdrio.merge_job.MergeOptions` into plain arrays, so it is
+exposures and hdrio's :class:`~hdrio.job.options.MergeOptions` into plain arrays, so it is
 tested without Blender.
 
-The tables come from hdrio's own merge (:func:`hdrio.merge.debevec1997.merge_tables`,
+The tables come from hdrio's own merge (:func:`hdrio.merge.weighted_mean.merge_tables`,
 the kernel's interface, with the weights of the options' estimator,
-:func:`hdrio.merge.estimators.effective_weights`): per bracket ``j``, channel ``c`` and
+:func:`hdrio.radiometry.estimators.effective_weights`): per bracket ``j``, channel ``c`` and
 code ``z``, the weight ``w_j(z)`` (the inverse-variance weights of the noise model the
 Solve fitted, by default) and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear
 domain, ``g(z) - ln dt_j`` in the log domain). Whatever weights and domain the options
@@ -26,12 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hdrio.merge.debevec1997 import merge_tables
-from hdrio.merge.estimators import MERGE_METHODS, NOISE_AWARE, effective_weights, merge_domain
-from hdrio.merge.noise import NoiseModel
-from hdrio.merge_job import MergeOptions
-from hdrio.response.curve import CameraResponse
-from hdrio.response.linear import linear_response
+from hdrio.job.options import MergeOptions
+from hdrio.job.plan import plan_merge
+from hdrio.radiometry.curve import CameraResponse, linear_response
+from hdrio.radiometry.noise import NoiseModel
+from hdrio.radiometry.tables import merge_tables
 
 CURVE_POINTS = 256
 """Points per baked curve. For 8-bit brackets there is one point at every code value, so
@@ -154,11 +153,11 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
     exposures = np.asarray(exposures, dtype=np.float64)
     if np.any(np.diff(exposures) < 0):
         raise ValueError("exposures must be given shortest first")
-    method = MERGE_METHODS.canonical(options.merge)
-    if method in NOISE_AWARE and noise is None:
+    plan = plan_merge(options)
+    if plan.estimator.needs_noise and noise is None:
         noise = NoiseModel.quantisation_only(response.channels)
-    domain = merge_domain(method)
-    weights = effective_weights(method, response, exposures, options.weighting, noise)
+    domain = plan.estimator.domain
+    weights = plan.weight_tables(response, exposures, noise)
     terms, estimates = merge_tables(response, exposures, options.weighting, domain, weights)
     code_max = int(response.code_max)
     count = min(points, code_max + 1)

@@ -16,9 +16,9 @@ from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files, merge_stack
 from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
 
 from .baking import response_to_json

@@ -17,7 +17,7 @@ import math
 
 import bpy
 
-from hdrio.cms.luminance import DEFAULT_SPACE, luminance_weights
+from hdrio.radiometry.luminance import DEFAULT_SPACE, luminance_weights
 from hdrio.tonemap.reinhard2002 import DELTA
 
 from .graph import GraphBuilder

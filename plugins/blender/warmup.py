@@ -18,8 +18,8 @@ from pathlib import Path
 def _merge_tiny_stack() -> None:
     """Read, solve, merge and write a 3-bracket 24x32 stack (every kernel of a merge)."""
     from hdrio.io.write import write_image
-    from hdrio.pipeline import merge_files
-    from hdrio.synthetic import demo_scene, render_brackets
+    from hdrio.job.run import merge_files
+    from hdrio.tools.synthetic import demo_scene, render_brackets
 
     exposures = (1 / 16, 1 / 2, 4.0)
     codes = render_brackets(demo_scene(24, 32), exposures)
@@ -32,8 +32,8 @@ def _merge_tiny_stack() -> None:
 
 def _tonemap_tiny_image() -> None:
     """Hdrio's Reinhard operators on a 24x32 image."""
-    from hdrio.synthetic import demo_scene
     from hdrio.tonemap import TONEMAP_METHODS
+    from hdrio.tools.synthetic import demo_scene
 
     radiance = demo_scene(24, 32)
     for name in ("reinhard-local", "reinhard-global"):

@@ -11,10 +11,10 @@ import pytest
 
 from hdrio.errors import InputError
 from hdrio.io.brackets import read_brackets
-from hdrio.merge.noise import NoiseModel
-from hdrio.merge_job import MergeOptions
-from hdrio.pipeline import merge_stack
-from hdrio.response.curve import CameraResponse
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_stack
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel
 from plugins.blender.baking import (
     CURVE_TABLE_SIZE,
     bake_merge,

@@ -24,10 +24,11 @@ from blender_scene import (  # noqa: E402
 import plugins.blender as addon  # noqa: E402
 from hdrio.io.brackets import read_brackets  # noqa: E402
 from hdrio.io.write import write_exr  # noqa: E402
-from hdrio.merge import MERGE_METHODS, fit_noise  # noqa: E402
-from hdrio.merge_job import MergeOptions  # noqa: E402
-from hdrio.response.curve import CameraResponse  # noqa: E402
-from hdrio.synthetic import demo_scene  # noqa: E402
+from hdrio.job.options import MergeOptions  # noqa: E402
+from hdrio.merge import MERGE_METHODS  # noqa: E402
+from hdrio.radiometry.curve import CameraResponse  # noqa: E402
+from hdrio.radiometry.noise import fit_noise  # noqa: E402
+from hdrio.tools.synthetic import demo_scene  # noqa: E402
 from plugins.blender.baking import response_to_json  # noqa: E402
 from plugins.blender.warmup import WARMUP  # noqa: E402
 
@@ -51,7 +52,7 @@ def registered_in_add_menu() -> bool:
 
 
 def gamma_camera_response(gamma: float = 2.2, code_max: int = 255) -> CameraResponse:
-    """``f^-1(Z) = (Z / code_max)^gamma``, the response hdrio.synthetic renders with.
+    """``f^-1(Z) = (Z / code_max)^gamma``, the response hdrio.tools.synthetic renders with.
 
     Code 0 is taken at half a code so that ``g`` stays finite; ``g(mid) = 0``.
     """

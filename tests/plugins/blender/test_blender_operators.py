@@ -26,10 +26,10 @@ import plugins.blender as addon  # noqa: E402
 from hdrio.cli import main as hdrio_main  # noqa: E402
 from hdrio.io.brackets import read_brackets  # noqa: E402
 from hdrio.io.write import write_exr  # noqa: E402
-from hdrio.merge_job import MergeOptions  # noqa: E402
-from hdrio.pipeline import merge_stack  # noqa: E402
-from hdrio.synthetic import demo_scene  # noqa: E402
+from hdrio.job.options import MergeOptions  # noqa: E402
+from hdrio.job.run import merge_stack  # noqa: E402
 from hdrio.tonemap import TONEMAP_METHODS  # noqa: E402
+from hdrio.tools.synthetic import demo_scene  # noqa: E402
 from plugins.blender.compat import compositor_tree  # noqa: E402
 from plugins.blender.nodes import refresh_curves, view_warning  # noqa: E402
 

@@ -5,7 +5,7 @@
 arguments and meaning: :func:`add_arguments` puts them on an argparse parser,
 :mod:`hdrio.cli.chain_merge` registers each as a chain operation that sets up the next
 ``--merge``, and both turn the collected values into one
-:class:`~hdrio.merge_job.MergeOptions` with :func:`merge_options` (which checks names,
+:class:`~hdrio.job.options.MergeOptions` with :func:`merge_options` (which checks names,
 colour spaces and combinations before any image is read).
 
 Names follow oiiotool where it has one (``--colorconfig``, ``-d``); older spellings stay
@@ -16,7 +16,7 @@ To add an option, append one :class:`Option` to :data:`MERGE_OPTIONS`::
     Option("--lambda", ("N",), "smoothing", positive_number, example=("10",),
            help="smoothness weight lambda of the response solve (default 50)")
 
-``key`` is the :class:`~hdrio.merge_job.MergeOptions` field it sets (add the field there
+``key`` is the :class:`~hdrio.job.options.MergeOptions` field it sets (add the field there
 if it is new; a key that is not a field must be handled in :func:`merge_options`);
 ``convert`` turns the typed arguments (a list of strings) into the value or raises
 ``ValueError`` with a message; ``example`` is a valid value, which the help shows and
@@ -72,7 +72,7 @@ class Option:
     arguments
         Names of the arguments, as shown in help (``("R,G,B",)``).
     key
-        Where the value goes: a :class:`~hdrio.merge_job.MergeOptions` field, or one of
+        Where the value goes: a :class:`~hdrio.job.options.MergeOptions` field, or one of
         the keys :func:`merge_options` and the readers handle (``exposures``...).
     convert
         ``convert(list_of_argument_strings) -> value``; raises ``ValueError``.
@@ -312,7 +312,7 @@ def set_value(settings: dict[str, Any], option: Option, value: Any) -> None:
 
 
 def merge_options(settings: Mapping[str, Any]):
-    """The :class:`~hdrio.merge_job.MergeOptions` for ``settings`` (keys of the table).
+    """The :class:`~hdrio.job.options.MergeOptions` for ``settings`` (keys of the table).
 
     Checks what single values cannot show: the colour space against the config,
     the ``--absolute`` references, ``--exposures`` with ``--exposures-from``. Raises
@@ -320,7 +320,7 @@ def merge_options(settings: Mapping[str, Any]):
     """
     from hdrio.cms.calibration import Calibration
     from hdrio.cms.spaces import require_scene_linear
-    from hdrio.merge_job import MergeOptions
+    from hdrio.job.options import MergeOptions
     from hdrio.skips import SKIPS
 
     if settings.get("exposures") is not None and settings.get("exposures_from") is not None:
@@ -346,7 +346,7 @@ def merge_options(settings: Mapping[str, Any]):
         raise HdrioError(f"--{given.replace('_', '-')} needs --absolute")
     response_from = settings.get("response_from")
     if response_from is not None and Path(response_from).exists():
-        from hdrio.response.stored import read_response
+        from hdrio.radiometry.saved_response import read_response
 
         try:
             read_response(response_from)  # the header only

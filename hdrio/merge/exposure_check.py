@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.io.staging import strided_copy
-from hdrio.response.curve import CameraResponse
+from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
 WARN_STOPS = 1 / 6

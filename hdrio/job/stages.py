@@ -1,0 +1,255 @@
+"""The stages of a merge before the merge itself, in the order :func:`hdrio.job.run.run_plan`
+runs them: the stack prepared (ND filters, brightness order, exclusions), the response
+solved (and the exposures checked against the data), the brackets aligned, the noise
+model fitted and the movers found.
+
+Each stage takes and returns plain data (stacks, responses, arrays, reports); what it
+is to do comes from the job's :class:`~hdrio.job.plan.MergePlan`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from hdrio import jit
+from hdrio.align.motion import Motion, align_step, deghost_step
+from hdrio.align.registration import align_masks
+from hdrio.cms.encoding import resolve_encoding
+from hdrio.errors import ResponseSolveError
+from hdrio.io.masks import mask_files, read_masks
+from hdrio.io.raw import is_raw_stack
+from hdrio.job.plan import MergePlan
+from hdrio.job.result import Progress
+from hdrio.merge.exclusion import colour_exclusion, either
+from hdrio.merge.exposure_check import ExposureCheck, exposures_from_data
+from hdrio.merge.ladder import (
+    in_brightness_order,
+    infer_exposures,
+    needs_inference,
+    starting_response,
+)
+from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
+from hdrio.radiometry.curve import CameraResponse
+from hdrio.radiometry.noise import NoiseModel, code_variance_floor, fit_noise
+from hdrio.radiometry.saved_response import check_response_fits
+from hdrio.response import RESPONSE_METHODS
+from hdrio.skips import classify
+from hdrio.stack import ExposureStack
+
+Solve = Callable[[ExposureStack, "np.ndarray | None"], CameraResponse]
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """The stack as the stages see it, and what it carries beside its pixels.
+
+    Attributes
+    ----------
+    stack
+        In exposure order (by brightness when it has no exposure metadata), with ND
+        filters' stops folded into its exposures (``--nd``).
+    filtered
+        Stops of ND filter per bracket, or ``None`` without ``--nd``.
+    inferring
+        The exposures are to be inferred from the pixels (no metadata).
+    masks
+        ``--mask`` files read in the stack's order, or ``None``.
+    excluded
+        ``(P, H, W)`` observations kept out of the solve and the merge, or ``None``.
+    """
+
+    stack: ExposureStack
+    filtered: np.ndarray | None
+    inferring: bool
+    masks: np.ndarray | None
+    excluded: np.ndarray | None
+
+
+def describe_set(stack: ExposureStack) -> str:
+    """The files of a stack for a message: ``a.png .. d.png (4 brackets, 32x24, all
+    dark: a.png)``, with the brackets that have no well-exposed pixel named."""
+    height, width = stack.shape[:2]
+    names = [Path(name).name for name in stack.files]
+    span = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]}"
+    notes = [f"{len(names)} brackets of {width}x{height}"]
+    dropped = [Path(name).name for name, _ in stack.dropped]
+    if dropped:
+        notes.append(f"no well-exposed pixel in {', '.join(dropped)}")
+    kinds = [classify(codes, stack.code_max) for codes in stack.codes]
+    for kind, label in (("dark", "all dark"), ("bright", "all bright")):
+        which = [name for name, k in zip(names, kinds) if k == kind]
+        if which:
+            notes.append(f"{label}: {', '.join(which)}")
+    return f"{span} ({'; '.join(notes)})"
+
+
+def exclusions(stack: ExposureStack, plan: MergePlan,
+               masks: np.ndarray | None) -> np.ndarray | None:
+    """``(P, H, W)`` bool: the observations ``--exclude-color`` and ``--mask`` (``masks``,
+    read by :func:`hdrio.io.masks.read_masks` in the stack's order) keep out of the solve
+    and the merge (:mod:`hdrio.merge.exclusion`), else ``None``."""
+    return either(colour_exclusion(stack.codes, plan.options.exclude_colour), masks)
+
+
+def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
+    """ND filters folded in, brightness order when there is no metadata, exclusions."""
+    options = plan.options
+    filtered = None
+    if options.nd:
+        stack, filtered = with_nd(stack, nd_stops(stack.files, options.nd))
+    inferring = needs_inference(stack)
+    if inferring:  # no exposure metadata: order by brightness, before masks
+        stack = in_brightness_order(stack)
+    if options.exposures_from_data and (stack.count < 3 or filtered is not None):
+        raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
+                         f"(the filters are measured on their own); got {stack.count} "
+                         "brackets" + (" and --nd" if filtered is not None else ""))
+    masks = read_masks(options.masks, stack.files, stack.shape[:2])  # in the stack's order
+    return Prepared(stack, filtered, inferring, masks, exclusions(stack, plan, masks))
+
+
+def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve:
+    """The solve ``--response`` names (the linear response for camera RAW), as
+    ``solve(stack, exclude)``: alignment and deghosting re-solve with it."""
+    options, filtered = plan.options, prepared.filtered
+    method = "linear" if is_raw_stack(prepared.stack) else options.response
+    say(f"camera response: {method}" + ("" if method == "linear"
+                                        else f", lambda {options.smoothing:g}"))
+    extra = {"solve_identical_once": "channels" in plan.skips} if method != "linear" else {}
+
+    def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+        if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
+            stack = unfiltered(stack, filtered)  # a filter's cast would bend g
+        return RESPONSE_METHODS[method](
+            stack, smoothing=options.smoothing, weighting=options.weighting,
+            sampling=options.sampling, samples=options.samples, exclude=exclude,
+            seed=options.seed, **extra)
+
+    return solve
+
+
+def _solved(solve: Solve, excluded: np.ndarray | None
+            ) -> Callable[[ExposureStack], CameraResponse]:
+    """``solve`` outside the excluded observations, its errors naming the set."""
+    def solved(stack: ExposureStack) -> CameraResponse:
+        try:
+            return solve(stack, None if excluded is None else excluded.any(axis=0))
+        except ResponseSolveError as error:
+            message = str(error).replace("a saved response", "a saved response "
+                                         "(--response-from EXR, from an earlier merge)")
+            if "--response-from" not in message:
+                message += "; or give a saved response: --response-from EXR"
+            raise ResponseSolveError(f"{describe_set(stack)}: {message}") from None
+
+    return solved
+
+
+def response_stage(prepared: Prepared, plan: MergePlan, response: CameraResponse | None,
+                   solve: Solve | None, say: Progress
+                   ) -> tuple[ExposureStack, CameraResponse, ExposureCheck | None]:
+    """The response (``solve``'s, or ``response`` as given), and the exposures inferred
+    from the pixels (no metadata) or checked against them (three brackets or more)."""
+    stack, filtered = prepared.stack, prepared.filtered
+    solved = None if solve is None else _solved(solve, prepared.excluded)
+    if response is not None:
+        check_response_fits(response, stack.code_max, stack.shape[2])
+    exposure_check = None
+    if prepared.inferring:  # no metadata: the ladder from the pixels (--exposures-from-data)
+        options = plan.options
+        start = response if response is not None else starting_response(
+            stack.code_max, stack.shape[2], resolve_encoding(
+                stack.files, stack.metadata, options.input_encoding)[0].name,
+            linear=is_raw_stack(stack) or options.response == "linear")
+        stack, response, exposure_check = infer_exposures(stack, start, solved)
+        say(f"exposures: {exposure_check.line()}")
+    elif solved is not None:
+        response = solved(stack)
+    if stack.count > 2 and filtered is None and exposure_check is None:
+        # two brackets cannot say which is wrong
+        stack, response, exposure_check = exposures_from_data(
+            stack, response, plan.options.exposures_from_data, solved)
+    return stack, response, exposure_check
+
+
+def align_stage(prepared: Prepared, response: CameraResponse, plan: MergePlan,
+                solve: Solve | None, owned: bool, say: Progress
+                ) -> tuple[Prepared, CameraResponse, Motion]:
+    """Brackets registered to the reference (``--align``) and the exclusions moved with
+    them; ``solve`` (``None``: keep the response) re-solves on the aligned brackets;
+    ``owned``: the stack may be warped in place."""
+    options, stack = plan.options, prepared.stack
+    if plan.aligns or plan.deghosts:
+        jit.announce(say, "motion")
+    if plan.aligns:
+        say(f"aligning {stack.count} brackets ({options.align})")
+    stack, response, motion = align_step(stack, response, options.align, solve,
+                                         in_place=owned, skip_warp="warp" in plan.skips)
+    masks, excluded = prepared.masks, prepared.excluded
+    if motion.warped and excluded is not None:  # the warped borders' colour
+        if masks is not None and len(set(mask_files(options.masks, stack.files))) > 1:
+            # A mask per bracket is drawn on that bracket: it moves with it. One shared
+            # mask is taken on the reference, where every bracket now is.
+            masks = align_masks(masks, motion.alignment)
+        excluded = exclusions(stack, plan, masks)
+    return replace(prepared, stack=stack, masks=masks, excluded=excluded), response, motion
+
+
+def nd_stage(stack: ExposureStack, response: CameraResponse, filtered: np.ndarray | None
+             ) -> tuple[ExposureStack, NDReport | None]:
+    """Each ND filter's gains measured on the aligned brackets (``--nd``)."""
+    if filtered is None:
+        return stack, None
+    gains, found = filter_gains(stack, response, filtered)
+    return replace(stack, channel_gains=gains), NDReport(stack.files, filtered, found)
+
+
+def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
+                  plan: MergePlan, solve: Solve | None, say: Progress
+                  ) -> tuple[CameraResponse, NoiseModel | None]:
+    """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved without
+    them (``solve``; ``None`` under exclusions): ``(response, noise)``, ``noise`` the
+    model the consistency test read (``None`` without deghosting)."""
+    if plan.deghosts:
+        say("deghosting")
+    noise = None
+    if plan.deghosts and stack.count > 1:
+        noise = fit_noise(stack.codes, stack.exposures, response,
+                          code_floor=code_variance_floor(stack.files))
+    return deghost_step(stack, response, motion, plan.options.deghost, solve, noise), noise
+
+
+def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
+                fitted: NoiseModel | None) -> NoiseModel | None:
+    """The noise model the merge reads, when the plan needs one: ``fitted`` (deghosting's,
+    on this same response) or fitted here; else ``None``."""
+    if not plan.fits_noise:
+        return None
+    if fitted is not None:
+        return fitted
+    return fit_noise(stack.codes, stack.exposures, response,
+                     code_floor=code_variance_floor(stack.files))
+
+
+def covering_bracket(stack: ExposureStack, prepared: Prepared, plan: MergePlan
+                     ) -> tuple[ExposureStack, str | None]:
+    """The one bracket that covers the scene (skip ``covered``), as a stack of one, and
+    its name; else ``stack`` and ``None``."""
+    kinds = stack.kinds
+    if "covered" in plan.skips and not all(kinds):  # not looked at when read
+        kinds = tuple(classify(codes, stack.code_max) for codes in stack.codes)
+    if ("covered" not in plan.skips or "covers" not in kinds
+            or prepared.excluded is not None or prepared.filtered is not None):
+        return stack, None
+    j = len(kinds) - 1 - kinds[::-1].index("covers")  # the longest
+    name = Path(stack.files[j]).name
+    one = ExposureStack.from_arrays(
+        stack.codes[j:j + 1], stack.exposures[j:j + 1], files=stack.files[j:j + 1],
+        code_max=stack.code_max, exposure_sources=stack.exposure_sources[j:j + 1],
+        metadata=stack.metadata[j:j + 1], kinds=("covers",),
+        dropped=stack.dropped + tuple((other, f"{name} covers the range")
+                                      for other in stack.files if other != stack.files[j]))
+    return one, name
