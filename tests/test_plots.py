@@ -61,6 +61,7 @@ def test_dominant_bracket_follows_brightness_and_saturation():
     ], dtype=np.uint8)[:, np.newaxis]
     stack = ExposureStack.from_arrays(codes, [1.0, 4.0, 16.0])
     response = response_linear(stack)
+    options = hdrio.MergeOptions()
     result = hdrio.MergeResult(stack, response, np.ones((1, 5, 3), np.float32), None,
-                               hdrio.MergeOptions())
+                               options, hdrio.plan_merge(options))
     assert dominant_bracket(result).tolist() == [[2, 1, 0, 0, -1]]

@@ -60,8 +60,8 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     skipped = SkipReport(dropped=list(stack.dropped))
     prepared = stages.prepare(stack, plan)
     solve = None if response is not None else stages.response_solver(prepared, plan, say)
-    stack, response, exposure_check = stages.response_stage(prepared, plan, response, solve,
-                                                            say)
+    prepared, response, exposure_check = stages.response_stage(prepared, plan, response,
+                                                               solve, say)
     if solve is not None:
         skipped.channels_solved = response.parameters.get("channels_solved")
     clock.lap("response")

@@ -150,9 +150,10 @@ def _solved(solve: Solve, excluded: np.ndarray | None
 
 def response_stage(prepared: Prepared, plan: MergePlan, response: CameraResponse | None,
                    solve: Solve | None, say: Progress
-                   ) -> tuple[ExposureStack, CameraResponse, ExposureCheck | None]:
+                   ) -> tuple[Prepared, CameraResponse, ExposureCheck | None]:
     """The response (``solve``'s, or ``response`` as given), and the exposures inferred
-    from the pixels (no metadata) or checked against them (three brackets or more)."""
+    from the pixels (no metadata) or checked against them (three brackets or more): the
+    stack carries the exposures the merge uses."""
     stack, filtered = prepared.stack, prepared.filtered
     solved = None if solve is None else _solved(solve, prepared.excluded)
     if response is not None:
@@ -172,7 +173,7 @@ def response_stage(prepared: Prepared, plan: MergePlan, response: CameraResponse
         # two brackets cannot say which is wrong
         stack, response, exposure_check = exposures_from_data(
             stack, response, plan.options.exposures_from_data, solved)
-    return stack, response, exposure_check
+    return replace(prepared, stack=stack), response, exposure_check
 
 
 def align_stage(prepared: Prepared, response: CameraResponse, plan: MergePlan,
