@@ -26,7 +26,7 @@ multiply-add.
 is summed, into a per-task buffer: every code of a pixel with a dropped channel becomes
 ``Z_max``, and the per-channel resets then apply it.
 
-**Pair tables** (8-bit codes, three channels: the common case; :mod:`hdrio.merge.pairs`).
+**Pair tables** (8-bit codes, three channels: the common case; :mod:`hdrio.merge.row_sums`).
 Two brackets ``j`` (longer) and ``j - 1`` are looked up together: one table per pair and
 channel indexed by both codes, ``z_j * 256 + z_{j-1}``, holds the pair's summed terms
 already (``T = t_j(z_j) s(z_{j-1}) + t_{j-1}(z_{j-1})``, with ``s`` the shorter bracket's

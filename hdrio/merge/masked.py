@@ -2,7 +2,7 @@
 
 The fused kernel (:mod:`hdrio.merge.kernel`) stays as it is and merges every pixel;
 this pass then re-merges only the pixels where some bracket's keep weight ``m_j`` is
-below 1, from the same tables (:func:`hdrio.merge.weighted_mean.merge_tables`), and
+below 1, from the same tables (:func:`hdrio.radiometry.tables.merge_tables`), and
 overwrites them:
 
 ``sum = sum * (1 - m_j s_j) + m_j t_j(z_j)`` over the brackets, longest first,
@@ -116,7 +116,7 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         ``(P, rows, cols)`` weights in [0, 1] at cell centres ``(i + 0.5) * cell``
         (float32 or float64; ``cell`` 1 gives per-pixel weights).
     terms, estimates
-        :func:`hdrio.merge.weighted_mean.merge_tables`' tables, ``(P, C, levels)``.
+        :func:`hdrio.radiometry.tables.merge_tables`' tables, ``(P, C, levels)``.
     per_channel, log_domain
         The saturation policy (``channel``) and the merge domain (``log``).
     limits

@@ -4,9 +4,9 @@ No ``bpy`` here: this module turns a :class:`hdrio.CameraResponse`, the brackets
 exposures and hdrio's :class:`~hdrio.job.options.MergeOptions` into plain arrays, so it is
 tested without Blender.
 
-The tables come from hdrio's own merge (:func:`hdrio.merge.weighted_mean.merge_tables`,
-the kernel's interface, with the weights of the options' estimator,
-:func:`hdrio.radiometry.estimators.effective_weights`): per bracket ``j``, channel ``c`` and
+The tables come from hdrio's own merge (:func:`hdrio.radiometry.tables.merge_tables`,
+the kernel's interface, with the weights of the estimator the options' plan resolves,
+:meth:`hdrio.job.plan.MergePlan.weight_tables`): per bracket ``j``, channel ``c`` and
 code ``z``, the weight ``w_j(z)`` (the inverse-variance weights of the noise model the
 Solve fitted, by default) and the estimate ``x_j(z)`` (``f^-1(z) / dt_j`` in the linear
 domain, ``g(z) - ln dt_j`` in the log domain). Whatever weights and domain the options
@@ -178,7 +178,7 @@ def scene_linear_response(code_max: int = 255) -> CameraResponse:
     """hdrio's linear response rescaled so that ``f^-1(z) = z`` on [0, 1] codes.
 
     The node's starting point before a solve: a render pass (scene-linear) with exposure
-    1 comes back at its own scale. (hdrio's :func:`~hdrio.response.linear.linear_response`
+    1 comes back at its own scale. (hdrio's :func:`~hdrio.radiometry.curve.linear_response`
     puts 1 at the middle code instead, which would make a pass 255/128 too bright.)
     """
     linear = linear_response(code_max, 3)

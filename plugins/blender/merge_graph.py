@@ -2,7 +2,7 @@
 
 Per channel ``c`` and bracket ``j`` (brackets wired from the shortest exposure up), with
 ``z`` the bracket read as Non-Color (code / code_max) and the tables of
-:func:`~.baking.bake_merge` (hdrio's :func:`~hdrio.merge.weighted_mean.merge_tables`)::
+:func:`~.baking.bake_merge` (hdrio's :func:`~hdrio.radiometry.tables.merge_tables`)::
 
     w_j   = weights_jc(z) * keep_cj                  baked per bracket, 0 once saturated
     x_j   = estimates_jc(z)                          E_j, or ln E_j in the log domain

@@ -17,8 +17,7 @@ import math
 
 import bpy
 
-from hdrio.radiometry.luminance import DEFAULT_SPACE, luminance_weights
-from hdrio.tonemap.reinhard2002 import DELTA
+from hdrio.radiometry.luminance import DEFAULT_SPACE, DELTA, luminance_weights
 
 from .graph import GraphBuilder
 
