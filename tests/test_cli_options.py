@@ -175,7 +175,7 @@ def test_cli_modules_import_one_way():
         if name != "hdrio.cli":  # the entry point imports the chain lazily, nothing back
             visit(name, ())
     for name in ("chain_merge", "chain_ops", "chain_colour", "chain_output",
-                 "chain_pictures", "chain_batch", "options", "chain_registry"):
+                 "chain_pictures", "chain_batch", "merge_arguments", "chain_registry"):
         assert "hdrio.cli.chain" not in graph[f"hdrio.cli.{name}"], name
 
 
