@@ -294,7 +294,7 @@ def merge_paths(paths: Sequence[str | Path], *,
     if options.response_from is not None and "response" in options.skips:
         response = read_response(options.response_from)
     start = time.perf_counter()
-    say(f"reading {len(paths)} brackets")
+    say(f"reading {len(paths)} bracket{'' if len(paths) == 1 else 's'}")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
                           progress=read_progress, white_balance=options.raw_multipliers,
                           skip_brackets="brackets" in options.skips,

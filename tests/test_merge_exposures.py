@@ -78,7 +78,7 @@ def test_cli_warns_naming_the_file_and_records_both(shared_data, tmp_path, capsy
     code, _, err = run(capsys, "merge", *paths, "-q", "-o", output)
     assert code == 0, err
     lines = [line for line in err.splitlines() if "warning" in line]
-    assert len(lines) == 1 and "shot4.png: exposure 1/3.175 in the metadata" in lines[0], lines
+    assert len(lines) == 1 and "shot4.png: exposure 1/3.175 in the EXIF" in lines[0], lines
     code, _, err = run(capsys, "merge", *paths, "-q", "--exposures-from-data", "-o", output)
     assert code == 0, err
     spec = oiio.ImageInput.open(str(output)).spec()
