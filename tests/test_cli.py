@@ -313,3 +313,8 @@ def test_every_subcommand_is_routed_to_its_parser_not_to_the_chain():
     parser = build_parser()
     action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     assert set(action.choices) == SUBCOMMANDS
+
+
+def test_one_bracket_is_counted_in_the_singular(brackets, out_dir, capsys):
+    code, _, err = run(capsys, "merge", brackets[0], "-o", out_dir / "one.exr")
+    assert code == 2 and "reading 1 bracket\n" in err and "1 brackets" not in err, err
