@@ -262,7 +262,7 @@ def add_demo(sub) -> None:
         description="Render a procedural HDR scene through a known camera response (with "
                     "sensor noise and 8-bit quantisation), merge it, write the EXR and a "
                     "preview, and print the error against the ground truth.",
-        epilog="example: hdrio demo -o demo_out",
+        epilog="example: hdrio demo -o hdrio_demo",
     )
     parser.add_argument("-o", "--output-dir", default="hdrio_demo",
                         help="folder for brackets, EXR and preview (default %(default)s)")
