@@ -396,6 +396,10 @@ CASES = [
     # tone mapping: non-finite and negative pixels as every operator treats them
     Case("tutorial global on negative pixels", _negative_exr, 0, "wrote",
          verify=_not_black),
+    Case("tutorial global on NaN and Inf pixels",
+         lambda d: [h.float_image(d / "in", nan_rows=4, inf_pixels=7), "--tonemap",
+                    "reinhard-global-tutorial", "-o", h.out(d, "o.png")], 0, "replaced",
+         verify=_not_black),
     # provenance: sources resolved, and relative to the EXR
     Case("relative source paths", _relative_sources, 0, "wrote:",
          verify=_sources_resolved),
