@@ -52,10 +52,11 @@ def out(folder: Path, name: str = "out.exr") -> Path:
     return target / name
 
 
-def merge(folder: Path, images, *extra) -> list[object]:
-    """``hdrio merge IMAGES -o out/out.exr --preview out/out.jpg -q EXTRA``."""
-    return ["merge", *images, "-o", out(folder), "--preview", out(folder, "out.jpg"), "-q",
-            *extra]
+def merge(folder: Path, images, *extra, quiet: bool = True) -> list[object]:
+    """``hdrio merge IMAGES -o out/out.exr --preview out/out.jpg -q EXTRA`` (without
+    ``-q`` when not ``quiet``: the summary printed)."""
+    return ["merge", *images, "-o", out(folder), "--preview", out(folder, "out.jpg"),
+            *(["-q"] if quiet else []), *extra]
 
 
 def saved_response(folder: Path, name: str = "response.exr", channels: int = 3,

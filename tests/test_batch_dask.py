@@ -26,6 +26,11 @@ SETS = 12
 LADDER = (1 / 64, 1 / 16, 1 / 4)
 
 
+# Slow (a real two-worker Dask cluster): deselected by default, run by
+# `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
+
+
 @dataclass(frozen=True)
 class SlowMerge(MergeSet):
     """A merge that takes at least ``delay_s``: sets still running when something is

@@ -105,6 +105,7 @@ def test_dry_run_shows_the_grouping_and_writes_nothing(shoot, tmp_path, capsys):
     assert list(out.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_sets_merge_in_parallel_and_a_second_run_does_nothing(shoot, tmp_path, capsys):
     out = tmp_path / "hdr"
     out.mkdir()
@@ -129,6 +130,7 @@ def test_sets_merge_in_parallel_and_a_second_run_does_nothing(shoot, tmp_path, c
     assert {p: p.stat().st_mtime_ns for p in out.iterdir()} == written  # nothing rewritten
 
 
+@pytest.mark.slow
 def test_a_failing_set_is_reported_and_the_others_still_merge(shoot, tmp_path, capsys,
                                                              write_brackets):
     out = tmp_path / "hdr"

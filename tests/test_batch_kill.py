@@ -67,6 +67,7 @@ _POOL_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_killing_the_parent_takes_its_pool_workers_down(shoot, tmp_path):
     script = tmp_path / "pool.py"
     script.write_text(_POOL_SCRIPT)

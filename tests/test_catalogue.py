@@ -28,6 +28,8 @@ class Case:
     build: Callable[[Path], list[object]]
     exit: int
     fragment: str
+    report: bool = False  # a refusal that prints its report on stdout first (hdrio check)
+    verify: Callable[[Path, str], None] | None = None  # more checks (case folder, output)
 
 
 def _rgb(d: Path) -> list[Path]:
@@ -117,6 +119,77 @@ def _group_names_input(d: Path) -> list[object]:
 
 def _grey_check(d: Path) -> list[object]:
     return ["check", h.grey_exr(d / "in")]
+
+
+def _strip(d: Path, size: tuple[int, int], *extra: object) -> list[object]:
+    return h.merge(d, h.ramp_set(d / "in", size=size), *extra, quiet=False)
+
+
+def _nan_exr(d: Path) -> list[object]:
+    return ["check", h.float_image(d / "in", nan_rows=2, inf_pixels=3)]
+
+
+def _check_of(d: Path, name: str, data: bytes | str) -> list[object]:
+    return ["check", h.text_file(d / "in" / name, data)]
+
+
+def _truncated_exr(d: Path) -> list[object]:
+    return ["check", h.truncated(h.float_image(d / "in"))]
+
+
+def _jpeg(d: Path) -> list[object]:
+    import numpy as np
+
+    from hdrio.io.write import write_image
+
+    (d / "in").mkdir(parents=True)
+    return ["check", write_image(d / "in" / "preview.jpg", np.zeros((8, 8, 3), np.uint8),
+                                 "uint8")]
+
+
+def _two_sets(d: Path) -> Path:
+    h.ramp_set(d / "shoot", stem="a")
+    h.ramp_set(d / "shoot", stem="b")
+    return d / "shoot"
+
+
+def _negative_exr(d: Path) -> list[object]:
+    import numpy as np
+
+    from hdrio.io.write import write_exr
+
+    pixels = h.ramp_radiance(48, 64).astype(np.float32)
+    pixels[4:8, 4:8] = -0.5
+    (d / "in").mkdir(parents=True)
+    exr = write_exr(d / "in" / "negative.exr", pixels, pixel_type="float")
+    return [exr, "--tonemap", "reinhard-global-tutorial", "-o", h.out(d, "o.png")]
+
+
+def _not_black(d: Path, _text: str) -> None:
+    import numpy as np
+    import OpenImageIO as oiio
+
+    pixels = oiio.ImageBuf(str(h.out(d, "o.png"))).get_pixels(oiio.FLOAT)
+    assert np.mean(pixels) > 0.2, np.mean(pixels)  # the clean ramp's preview: about 0.5
+
+
+def _relative_sources(d: Path) -> list[object]:
+    images = _rgb(d)
+    return ["merge", *(Path("in") / p.name for p in images), "-o", Path("out") / "o.exr",
+            "-q"]
+
+
+def _sources_resolved(d: Path, _text: str) -> None:
+    from hdrio.io.header import read_header
+
+    header = read_header(d / "out" / "o.exr")
+    assert all(Path(p).is_absolute() and Path(p).is_file()
+               for p in header["hdrio:sourceFiles"])
+    assert all(p.startswith("../in/") for p in header["hdrio:sourceFilesRelative"])
+
+
+def _only_written(d: Path, text: str) -> None:
+    assert [line.split()[0] for line in text.splitlines()] == ["wrote:", "preview:"], text
 
 
 CASES = [
@@ -243,9 +316,10 @@ CASES = [
     Case("2x2 brackets", lambda d: h.merge(d, h.ramp_set(d / "in", size=(2, 2))), 2,
          "--response-from"),
     # ---- greyscale brackets: first class
-    Case("grey merge", lambda d: h.merge(d, _grey(d)), 0, "1 ch"),
+    Case("grey merge", lambda d: h.merge(d, _grey(d), quiet=False), 0, "1 ch"),
     Case("grey 16-bit merge", lambda d: h.merge(d, h.ramp_set(d / "in", channels=1,
-                                                               bit_depth=16)), 0, "16-bit"),
+                                                               bit_depth=16), quiet=False),
+         0, "16-bit"),
     Case("grey and colour mixed", lambda d: h.merge(d, [*_rgb(d)[:2],
                                                        *h.ramp_set(d / "grey", 1)[2:]]), 2,
          "brackets must match"),
@@ -268,6 +342,69 @@ CASES = [
     Case("chain needs a merge", lambda d: [*_rgb(d), "-o", h.out(d)], 2, "--merge"),
     Case("chain scene-linear to jpg",
          lambda d: [h.float_image(d / "in"), "-o", h.out(d, "o.jpg")], 2, "tone-map it"),
+    # ---- issue 31: nothing lost, nothing broken
+    # hdrio check on what is not a whole, finite EXR: the file named, exit 2
+    Case("check a JPEG", _jpeg, 2, "preview.jpg: a JPEG image, not OpenEXR"),
+    Case("check a PNG bracket", lambda d: ["check", _rgb(d)[0]], 2,
+         "a PNG image, not OpenEXR"),
+    Case("check a text file", lambda d: _check_of(d, "notes.exr", "hello\n"), 2,
+         "notes.exr: not an OpenEXR file"),
+    Case("check an empty file", lambda d: _check_of(d, "empty.exr", b""), 2,
+         "empty.exr: not an OpenEXR file"),
+    Case("check a truncated EXR", _truncated_exr, 2, "scene.exr: "),
+    Case("check NaN and Inf pixels", _nan_exr, 2, "scene.exr: 131 of 3072 pixels hold NaN",
+         report=True),
+    Case("check a folder", lambda d: ["check", (d / "in").mkdir() or d / "in"], 2,
+         "is a folder"),
+    # outputs planned before any work
+    Case("group with a fixed output",
+         lambda d: [_two_sets(d), "--group", "--merge", "-o", h.out(d, "fixed.exr")], 2,
+         "would both write it; put {index} or {first_stem}"),
+    Case("group dry run with a fixed output",
+         lambda d: [_two_sets(d), "--dry-run", "--group", "--merge", "-o",
+                    h.out(d, "fixed.exr")], 2, "would both write it", report=True),
+    Case("group pattern {folder} shared",
+         lambda d: [_two_sets(d), "--group", "--merge", "-o", "{folder}/o.exr"], 2,
+         "sets 1 ("),
+    Case("group pattern written twice per set",
+         lambda d: [_two_sets(d), "--group", "--merge", "-o", str(h.out(d, "{index}.exr")),
+                    "--tonemap", "reinhard-global", "-o", str(h.out(d, "{index}.exr"))],
+         2, "an earlier output of this chain writes this file too"),
+    Case("chain two outputs to one file",
+         lambda d: [*_rgb(d), "--merge", "-o", h.out(d), "--tonemap", "reinhard-global",
+                    "-o", h.out(d)], 2, "an earlier output of this chain writes this file"),
+    # every error in hdrio's words, naming the file or option
+    Case("1x1000 strip", lambda d: _strip(d, (1, 1000)), 0, "too small to register"),
+    Case("1000x1 strip", lambda d: _strip(d, (1000, 1)), 0, "too small to register"),
+    Case("5x5 thumbnail", lambda d: _strip(d, (5, 5)), 0, "too small to register"),
+    Case("1x1000 strip --align translation",
+         lambda d: [*h.merge(d, h.ramp_set(d / "in", size=(1, 1000))), "--align",
+                    "translation"], 2, "--align translation: the brackets are 1000x1"),
+    Case("merge option typo", lambda d: h.merge(d, _rgb(d), "--exposure", "1"), 2,
+         "--exposure: unknown option (did you mean --exposures?); usage: hdrio merge"),
+    Case("merge option abbreviated", lambda d: h.merge(d, _rgb(d), "--merg", "log"), 2,
+         "did you mean --merge?"),
+    Case("merge missing -o", lambda d: ["merge", *_rgb(d)], 2,
+         "missing -o/--output; usage: hdrio merge"),
+    Case("merge bad choice", lambda d: h.merge(d, _rgb(d), "-d", "halff"), 2,
+         "--data-type halff: not one of half, float (did you mean half?)"),
+    Case("chain operation typo", lambda d: [*_rgb(d), "--merg", "-o", h.out(d)], 2,
+         "--merg: unknown operation (did you mean --merge?)"),
+    Case("chain given a merge option", lambda d: [*_rgb(d), "--merge", "--preview",
+                                                  h.out(d, "p.jpg")], 2,
+         "--tonemap reinhard-global -o preview.jpg"),
+    # tone mapping: non-finite and negative pixels as every operator treats them
+    Case("tutorial global on negative pixels", _negative_exr, 0, "wrote",
+         verify=_not_black),
+    Case("tutorial global on NaN and Inf pixels",
+         lambda d: [h.float_image(d / "in", nan_rows=4, inf_pixels=7), "--tonemap",
+                    "reinhard-global-tutorial", "-o", h.out(d, "o.png")], 0, "replaced",
+         verify=_not_black),
+    # provenance: sources resolved, and relative to the EXR
+    Case("relative source paths", _relative_sources, 0, "wrote:",
+         verify=_sources_resolved),
+    Case("-q prints only what was written", lambda d: h.merge(d, _rgb(d)), 0, "wrote:",
+         verify=_only_written),
 ]
 
 
@@ -281,11 +418,13 @@ def test_catalogue(case: Case, tmp_path: Path, capsys) -> None:
     assert code == case.exit, text
     if case.exit == 0:
         assert case.fragment in text, text
+        if case.verify is not None:
+            case.verify(tmp_path, out)
         return
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     assert case.fragment.lower() in lines[0].lower(), lines[0]
-    assert out == ""
+    assert (out != "") if case.report else (out == "")
     assert h.snapshot(tmp_path) == before  # nothing written, nothing left, inputs unchanged
 
 

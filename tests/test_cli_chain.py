@@ -110,6 +110,7 @@ def test_exposures_from_exif_by_default(write_brackets, out, capsys):
     assert [float(t) for t in header["hdrio:exposures"]] == pytest.approx(DEFAULT_EXPOSURES)
 
 
+@pytest.mark.slow
 def test_response_linear_on_linear_16_bit_tiffs(tmp_path, out, capsys):
     truth = ramp_radiance(48, 64)
     codes = render_brackets(truth, list(DEFAULT_EXPOSURES), response=lambda x: x,
@@ -313,6 +314,7 @@ def test_response_from_a_file_without_a_response(brackets, out, tmp_path, capsys
 # ------------------------------------------------------------------- 16-bit TIFF brackets
 
 
+@pytest.mark.slow
 def test_16_bit_tiff_brackets_merge_through_a_binned_response(tmp_path, out, capsys):
     # About a minute: at 1024 levels the response solve leaves the fast normal-equation
     # path for the dense SVD one (hdrio/response/debevec1997.py), 20-30 s per channel.

@@ -139,6 +139,7 @@ def _run_all(commands: list[str], capsys) -> None:
             assert code == 0, f"hdrio {shlex.join(argv)}\n{captured.err}"
 
 
+@pytest.mark.slow
 def test_readme_then_help_examples_run_as_written(fresh_folder, capsys):
     """One test (the README's commands take a while): the help's examples read the
     out.exr and room.exr that the README's wrote, as a reader would have them."""

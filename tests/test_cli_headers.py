@@ -122,3 +122,35 @@ def test_exposure_text_is_short_and_exact():
     assert exposure_text(1 / 3) == repr(1 / 3)  # a 64-bit time keeps every digit
     for t in DEFAULT_EXPOSURES:
         assert float(exposure_text(t)) == t
+
+
+def test_source_paths_are_absolute_and_relative_to_the_exr(write_brackets, tmp_path,
+                                                           capsys, monkeypatch):
+    """``hdrio:sourceFiles`` and ``hdrio:alignReference`` hold the paths resolved, and
+    their ``...Relative`` twins the paths from the EXR's folder: after the shot folder is
+    moved (to a farm node, say), the relative ones still lead to the brackets."""
+    shot = tmp_path / "shot"
+    write_brackets(folder=shot / "brackets")
+    monkeypatch.chdir(shot)
+    names = sorted(str(p.relative_to(shot)) for p in (shot / "brackets").iterdir())
+    code, _, err = run(capsys, "merge", *names, "--align", "translation", "-o",
+                       "hdr/out.exr", "-q")
+    assert code == 0, err
+    code, _, err = run(capsys, "hdr/out.exr", "--tonemap", "reinhard-global", "-o",
+                       "display/view.exr")  # a display-referred EXR carries them too
+    assert code == 0, err
+    resolved = [str((shot / name).resolve()) for name in names]
+    for exr, relative in (("hdr/out.exr", "../brackets"), ("display/view.exr", "../brackets")):
+        header = _header(shot / exr)
+        sources = list(header["hdrio:sourceFiles"])  # shortest exposure first
+        assert sorted(sources) == sorted(resolved)
+        assert list(header["hdrio:sourceFilesRelative"]) == [
+            f"{relative}/{Path(source).name}" for source in sources]
+        reference = header["hdrio:alignReference"]
+        assert reference in resolved
+        assert header["hdrio:alignReferenceRelative"] == f"{relative}/{Path(reference).name}"
+    moved = tmp_path / "farm" / "shot"
+    moved.parent.mkdir()
+    shot.rename(moved)
+    header = _header(moved / "hdr" / "out.exr")
+    assert all((moved / "hdr" / rel).is_file() for rel in header["hdrio:sourceFilesRelative"])

@@ -223,3 +223,28 @@ def test_chain_refuses_to_overwrite_an_exr_input_before_work(brackets, tmp_path,
                        "-o", exr)
     assert code == 2 and "would overwrite an input" in err, err
     assert exr.read_bytes() == before and not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.parametrize("name, modes", [
+    ("--align", "ALIGN_MODES"), ("--deghost", "DEGHOST_MODES"),
+    ("--saturation", "SATURATION_POLICIES"), ("--highlights", "HIGHLIGHT_MODES")])
+def test_help_of_a_choice_lists_every_value_and_the_real_default(name, modes):
+    """The help cannot drift from the code: every value is named, and the one marked
+    default is MergeOptions' default (the --saturation help said 'safe' while the
+    default was 'auto')."""
+    import re
+    from dataclasses import fields
+
+    import hdrio.align
+    import hdrio.merge.highlights
+    import hdrio.merge.saturation
+    from hdrio.job.options import MergeOptions
+
+    values = next(getattr(module, modes) for module in
+                  (hdrio.align, hdrio.merge.highlights, hdrio.merge.saturation)
+                  if hasattr(module, modes))
+    option = OPTIONS_BY_NAME[name]
+    default = {f.name: f.default for f in fields(MergeOptions)}[option.key]
+    assert all(re.search(rf"\b{value}\b", option.help) for value in values), option.help
+    marked = re.findall(r"'(\w+)' \(default|\(default (\w+)\)", option.help)
+    assert [a or b for a, b in marked] == [default], option.help

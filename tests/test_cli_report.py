@@ -18,7 +18,7 @@ def _check_lines(text: str) -> list[str]:
 @pytest.mark.parametrize("extra", [[], ["--colorspace", "ACEScg", "-d", "float"]])
 def test_merge_report_equals_hdrio_check_of_the_file(brackets, tmp_path, capsys, extra):
     out = tmp_path / "out.exr"
-    code, merged, err = run(capsys, "merge", *brackets, "-o", out, "-q", *extra)
+    code, merged, err = run(capsys, "merge", *brackets, "-o", out, *extra)
     assert code == 0, err
     code, checked, err = run(capsys, "check", out)
     assert code == 0, err

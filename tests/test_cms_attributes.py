@@ -11,6 +11,7 @@ import pytest
 
 from hdrio.cms.calibration import Calibration
 from hdrio.io.header import read_header
+from hdrio.io.paths import SOURCE_ATTRIBUTES
 from hdrio.io.write import Float2, write_image
 from hdrio.job.options import MergeOptions
 from hdrio.job.output import exr_attributes
@@ -86,7 +87,10 @@ def test_every_attribute_round_trips_through_openexr_and_openimageio(merged):
         assert _same(via_openexr[name], value), (name, via_openexr[name], value)
     assert via_oiio["compression"] == "zip"
     assert via_openexr["compression"] == OpenEXR.ZIP_COMPRESSION
-    extra = set(via_oiio) - set(written) - ADDED_BY_READERS - {"compression"}
+    # Added as written: the source paths relative to the EXR's own folder.
+    relative = {f"{name}Relative" for name in SOURCE_ATTRIBUTES if name in written}
+    assert relative <= set(via_oiio) and relative <= set(via_openexr)
+    extra = set(via_oiio) - set(written) - ADDED_BY_READERS - {"compression"} - relative
     assert not {n for n in extra if not n.startswith(".")}, extra
 
 
@@ -119,6 +123,8 @@ def _documented_names() -> set[str]:
 def test_every_attribute_is_documented_and_short(merged):
     result, _ = merged
     documented = _documented_names()
-    for name in exr_attributes(result):
+    written = exr_attributes(result)
+    relative = [f"{name}Relative" for name in SOURCE_ATTRIBUTES if name in written]
+    for name in [*written, *relative]:
         assert len(name) <= 31, f"{name}: longer than 31 characters"
         assert name in documented, f"{name} missing from docs/metadata.md"

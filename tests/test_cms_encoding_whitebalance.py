@@ -117,7 +117,7 @@ def _run(capsys, *argv) -> tuple[int, str, str]:
 def test_merge_colour_options_end_to_end(write_brackets, tmp_path, capsys):
     paths = write_brackets()
     exr, jpg = tmp_path / "o.exr", tmp_path / "o.jpg"
-    code, out, err = _run(capsys, "merge", *paths, "-o", exr, "--preview", jpg, "-q",
+    code, out, err = _run(capsys, "merge", *paths, "-o", exr, "--preview", jpg,
                           "--colorspace", "ACES2065-1", "--white-balance", "20,10,8,8",
                           "--absolute", "luminance", "--reference-region", "30,20,6,6",
                           "--reference-luminance", "100", "--ocio-display", "sRGB - Display")

@@ -95,6 +95,7 @@ def memorial(shared_data, tmp_path_factory):
 
 
 @pytest.mark.parametrize("lut_format", ["spi1d", "clf"])
+@pytest.mark.slow
 def test_exported_response_through_oiiotool_matches_hdrio(memorial, tmp_path, lut_format):
     result, exr, brackets = memorial
     tool = _oiiotool()

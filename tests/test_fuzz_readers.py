@@ -10,6 +10,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -23,6 +24,11 @@ from hdrio.radiometry.saved_response import check_response_fits, response_from_h
 EXAMPLES = settings(max_examples=2000, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.too_slow])
 FOLDER = Path(tempfile.mkdtemp(prefix="hdrio-fuzz-"))
+
+
+# Slow (hypothesis: hundreds of generated files): deselected by default, run by
+# `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
 
 
 def _seed_files() -> dict[str, bytes]:

@@ -24,6 +24,11 @@ EXPOSURES = (1 / 64, 1 / 16, 1 / 4, 1.0)
 SIZE = (48, 64)
 
 
+# Slow (camera RAW brackets through rawpy, end to end): deselected by default, run by
+# `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture
 def truth() -> np.ndarray:
     """The conftest ramp: 0.01 .. 12.6, so the 1 s and 1/4 s frames clip its bright end."""

@@ -7,8 +7,14 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from hdrio import jit
 from hdrio.parallel import threads
+
+# Slow (compiles every kernel in fresh processes with an empty cache): deselected by
+# default, run by `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
 
 _CACHED = """
 import sys

@@ -124,6 +124,7 @@ def test_a_masked_bracket_is_filled_from_the_others(brackets, tmp_path, capsys):
     assert "masked:       0.13 %" in out
 
 
+@pytest.mark.slow
 def test_memorial_registration_border_is_not_merged(shared_data):
     """Issue 15's acceptance: with --exclude-color 0,0,255 no once-excluded pixel stays
     blue (before: 62 % of them had B > 1.5 max(R, G)), and the clipped fraction is no

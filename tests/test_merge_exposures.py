@@ -78,7 +78,7 @@ def test_cli_warns_naming_the_file_and_records_both(shared_data, tmp_path, capsy
     code, _, err = run(capsys, "merge", *paths, "-q", "-o", output)
     assert code == 0, err
     lines = [line for line in err.splitlines() if "warning" in line]
-    assert len(lines) == 1 and "shot4.png: exposure 1/3.175 in the metadata" in lines[0], lines
+    assert len(lines) == 1 and "shot4.png: exposure 1/3.175 in the EXIF" in lines[0], lines
     code, _, err = run(capsys, "merge", *paths, "-q", "--exposures-from-data", "-o", output)
     assert code == 0, err
     spec = oiio.ImageInput.open(str(output)).spec()
@@ -142,6 +142,7 @@ def _relative_error(radiance: np.ndarray, truth: np.ndarray) -> float:
     ("MtTamWest", "dorf50", (1.0,) * 6, "step inferred: 1 stop"),
     ("Desk", "dorf150", (1 / 3,) * 8, "step inferred: 1/3 stop"),
 ])
+@pytest.mark.slow
 def test_exposures_inferred_with_no_metadata(scene, curve, stops, said, shared_data,
                                              tmp_path):
     """PNGs with no metadata, named in a shuffled order: the ladder is put in order, its
@@ -275,6 +276,7 @@ def test_cli_infers_a_folder_of_pngs_without_metadata(shared_data, tmp_path, cap
     np.testing.assert_allclose(np.array(chain_used, float), used, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_group_without_metadata_needs_a_group_size(shared_data, tmp_path, capsys):
     """Frames with no exposure and no capture time: --group cannot split them, so it
     refuses before any work, naming a frame; --group-size N splits them, each set is
@@ -303,6 +305,7 @@ def _stripped(files, folder) -> list:
     return [write_image(folder / f"{f.stem}.png", read_codes(f)[0], "uint8") for f in files]
 
 
+@pytest.mark.slow
 def test_real_sets_stripped_of_metadata(shared_data, tmp_path):
     """Real sets with their metadata stripped. hdrtoolbox 'alignment' (3 hand-held JPEGs,
     EXIF 2 stops apart): step inferred 2 stops, each exposure within 0.05 stop of EXIF's
@@ -352,6 +355,7 @@ def _partly_known(codes: np.ndarray, times: np.ndarray, known: dict[int, float]
         metadata=[{"ExposureTime": known[j]} if j in known else {} for j in range(count)])
 
 
+@pytest.mark.slow
 def test_some_brackets_with_exif_fix_the_step_and_the_unit(shared_data):
     """A toe-heavy curve (DoRF 200) fools the starting sRGB curve: with no metadata the
     step comes out 2 1/3 stops for 2. Two brackets that kept their EXIF time fix it
@@ -413,3 +417,16 @@ def test_a_real_set_with_one_file_stripped_of_exif(shared_data, tmp_path, capsys
     exposures = [float(t) for t in header["hdrio:exposures"]]
     assert exposures[0] == 0.125 and exposures[2] == 8.0
     assert abs(np.log2(exposures[1])) < 1 / 20, exposures
+
+
+@pytest.mark.parametrize("source, said", [
+    ("sidecar", "in the exposure list (--exposures-from)"), ("exif", "in the EXIF"),
+    ("filename", "in the file name"), ("explicit", "given by --exposures")])
+def test_the_warning_says_where_the_exposure_came_from(source, said):
+    """Memorial's exposures come from its CSV: the warning said 'in the metadata'."""
+    from hdrio.merge.exposure_check import ExposureCheck
+
+    check = ExposureCheck(("a.png", "b.png"), np.array([1 / 1024, 1 / 512]),
+                          np.array([1 / 1024, 1 / 256]))
+    (line,) = check.warnings(source)
+    assert line.startswith(f"b.png: exposure 1/512 {said}, the data say 1/256 (+1.00 stop)")

@@ -199,6 +199,7 @@ def stress():
        scene=st.sampled_from(["ramp", "flat", "clipped", "black"]),
        method=st.sampled_from([name for name, estimator in ESTIMATORS.items()
                                       if estimator.needs_noise]))
+@pytest.mark.slow
 def test_noise_aware_estimators_never_fail(step, count, bits, scene, method):
     # Exposure ratios 2^-20..2^20 between neighbours, 2..20 brackets, 8..16 bits, flat and
     # all-clipped or all-black scenes: the fit and the merge never raise, every value is

@@ -75,6 +75,7 @@ def dorf(shared_data):
 
 
 @pytest.mark.parametrize("scene", SCENES)
+@pytest.mark.slow
 def test_round_trip_on_real_radiance(scene, dorf, shared_data):
     import OpenImageIO as oiio
 
@@ -94,6 +95,7 @@ def test_round_trip_on_real_radiance(scene, dorf, shared_data):
         assert error["median"] <= 0.02, (scene, curve, error)
 
 
+@pytest.mark.slow
 def test_memorial_merge_and_opencv_reference(shared_data, tmp_path):
     from hdrio.cli import main
     from hdrio.io.header import read_header

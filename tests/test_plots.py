@@ -28,6 +28,7 @@ def read_png(path: Path) -> np.ndarray:
     return np.asarray(pixels)
 
 
+@pytest.mark.slow
 def test_every_picture_is_written_through_the_chain(write_brackets, tmp_path, capsys):
     brackets = write_brackets(DEFAULT_EXPOSURES)
     argv = [*map(str, brackets), "--merge"]

@@ -55,6 +55,7 @@ def test_gauge_row_weighs_like_the_heaviest_column():
     (1000, 7, 256, 120.0),  # the speed benchmark's solve
     (150, 5, 1024, 960.0),  # 16-bit input's 1024 bins, lambda scaled as the solve does
 ])
+@pytest.mark.slow
 def test_fast_solve_matches_dense_lstsq(n_samples, n_brackets, levels, smoothing):
     # The bound, as in test_response_debevec1997: 1e-6 of the range of g. The
     # Schur complement is assembled from code pairs here, never from A.

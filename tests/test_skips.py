@@ -112,7 +112,7 @@ def test_saved_response_skips_the_solve_and_gives_the_same_exr(tmp_path, capsys)
                            "-o", first, "-q", "-d", "float")
     assert code == 0
     code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
-                           "-o", tmp_path / "second.exr", "-q", "-d", "float",
+                           "-o", tmp_path / "second.exr", "-d", "float",
                            "--response-from", first)
     assert code == 0 and f"solve (response from {first})" in out
     from hdrio.io.images import read_image
@@ -184,15 +184,15 @@ def test_summary_reports_the_skips_and_no_skip_all_turns_them_off(tmp_path, caps
     stack = ladder_beyond_scene(*SIZE)
     paths, exposures = _write(stack, tmp_path / "in")
     code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
-                           "-o", tmp_path / "a.exr", "-q")
+                           "-o", tmp_path / "a.exr")
     assert code == 0
     skipped = [line for line in out.splitlines() if line.startswith("skipped:")]
     assert any("dropped" in line and "all dark" in line for line in skipped)
     paths, exposures = _write(covered_scene(*SIZE), tmp_path / "covered")
     code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
-                           "-o", tmp_path / "c.exr", "-q")
+                           "-o", tmp_path / "c.exr")
     assert code == 0 and "(b2.png covers the range)" in out
     code, out, _ = run_cli(capsys, "merge", *paths, "--exposures", ",".join(exposures),
-                           "-o", tmp_path / "b.exr", "-q", "--no-skip", "all")
+                           "-o", tmp_path / "b.exr", "--no-skip", "all")
     assert code == 0 and "skipped:" not in out
     assert set(SKIPS) == {"brackets", "response", "covered", "channels", "early-stop", "warp"}

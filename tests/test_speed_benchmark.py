@@ -8,6 +8,10 @@ import pytest
 
 from benchmarks.speed.__main__ import main
 
+# Slow (runs the speed benchmark's sections): deselected by default, run by
+# `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
+
 
 def test_speed_benchmark_writes_rows_and_ratios(tmp_path, capsys):
     pytest.importorskip("cv2", reason="OpenCV (the bench extra) is the peer being timed")

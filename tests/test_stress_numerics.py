@@ -124,6 +124,7 @@ position, log_lambda = st.floats(0.0, 1.0), st.floats(-3.0, 5.0)
 @example(count=3, position=1.0, longest_first=False, log_lam=5.0, samples=5000, seed=2)
 @example(count=30, position=1.0, longest_first=False, log_lam=-3.0, samples=5000, seed=3)
 @example(count=30, position=0.0, longest_first=True, log_lam=5.0, samples=20, seed=4)
+@pytest.mark.slow
 def test_extreme_ratios_and_counts_8bit(count, position, longest_first, log_lam, samples,
                                         seed):
     exposures = spaced(count, position, longest_first)
@@ -140,6 +141,7 @@ def test_extreme_ratios_and_counts_8bit(count, position, longest_first, log_lam,
 @example(bits=14, count=6, position=0.0, longest_first=False, log_lam=-3.0, samples=400,
          seed=3)
 @example(bits=16, count=6, position=1.0, longest_first=True, log_lam=5.0, samples=20, seed=4)
+@pytest.mark.slow
 def test_bit_depths_over_the_regimes(bits, count, position, longest_first, log_lam,
                                      samples, seed):
     # At most 6 brackets and 400 samples: 1024-level solves take the dense SVD path.

@@ -24,6 +24,11 @@ PEERS_OPENCV = ("OpenCV Debevec", "OpenCV Robertson")
 PEERS = (*PEERS_OPENCV, "colour-hdri Debevec")
 
 
+# Slow (the truth harness's quick run: renders and merges with every method):
+# deselected by default, run by `pytest -m slow` (CI runs both).
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def run(shared_data, tmp_path_factory):
     pytest.importorskip("cv2", reason="OpenCV is a benchmark extra: pip install .[bench]")

@@ -59,9 +59,17 @@ class Motion:
     deghosting: Deghosting | None = None
     uncovered: float = 0.0
     best_exposed: int | None = None
+    too_small: str = ""
+    """Why ``--align auto`` registered nothing (brackets too small), or ``""``."""
     keep: np.ndarray | None = None
     """``(P, rows, cols)`` keep weights on cells of :data:`hdrio.align.deghost.CELL`
     pixels, or ``None`` when no bracket is dropped anywhere."""
+
+
+MIN_REGISTER_SIDE = 8
+"""Brackets narrower or shorter than this are not registered: the still check's sample
+grid has no two rows (a 1 x 1000 strip, a 5 x 5 thumbnail) and a warp measured on so few
+pixels means nothing."""
 
 
 def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
@@ -73,6 +81,14 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
     ``skip_warp`` false (``--no-skip warp``) makes ``auto`` measure fully and warp."""
     motion = Motion()
     if mode == "off" or stack.count < 2:
+        return stack, response, motion
+    height, width = stack.codes.shape[1:3]
+    if min(height, width) < MIN_REGISTER_SIDE:
+        why = (f"the brackets are {width}x{height} pixels, too small to register (at "
+               f"least {MIN_REGISTER_SIDE} on each side)")
+        if mode != "auto":
+            raise HdrioError(f"--align {mode}: {why}; give --align off")
+        motion.too_small = why
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:

@@ -15,6 +15,7 @@ from pathlib import Path
 from hdrio.batch.fingerprint import set_fingerprint
 from hdrio.batch.grouping import BracketSet, format_times
 from hdrio.batch.journal import is_done
+from hdrio.errors import OutputError
 
 RUN, DONE = "run", "done"
 
@@ -51,7 +52,8 @@ class SetTask:
 
     def describe(self) -> str:
         """``7 frames, 1/1000 1/250 ... 1/4 s: IMG_0001.jpg .. IMG_0007.jpg``."""
-        return (f"{len(self.files)} frames, {format_times(self.times_s)}: "
+        count = len(self.files)
+        return (f"{count} frame{'' if count == 1 else 's'}, {format_times(self.times_s)}: "
                 f"{self.files[0].name} .. {self.files[-1].name}")
 
 
@@ -108,6 +110,7 @@ def plan_sets(sets: Sequence[BracketSet], outputs_for: Callable[[dict[str, str]]
         tasks.append(SetTask(index, tuple(bracket_set.files), tuple(bracket_set.times_s),
                              fields, tuple(outputs_for(fields)),
                              set_fingerprint(bracket_set.files, recipe, named_files), status))
+    refuse_colliding_outputs(tasks)  # every set's, whichever shard runs it
     if shard is not None:
         runnable = [task for task in tasks if task.status == RUN]
         mine = {task.index for task in
@@ -118,6 +121,34 @@ def plan_sets(sets: Sequence[BracketSet], outputs_for: Callable[[dict[str, str]]
         tasks = [_with_status(task, DONE) if task.status == RUN
                  and is_done(task.outputs, task.fingerprint) else task for task in tasks]
     return tasks
+
+
+def refuse_colliding_outputs(tasks: Sequence[SetTask]) -> None:
+    """Raise :class:`~hdrio.errors.OutputError` when two outputs of the sets that would
+    run are one file (two sets, or two outputs of one set), naming the file and both.
+
+    Otherwise the later would overwrite the earlier, and a rerun would take the earlier
+    set's outputs for the later's and merge the earlier again (a fixed ``-o`` name for
+    a shoot, or a field such as ``{folder}`` that two sets share)."""
+    from hdrio.io.paths import file_key
+
+    written: dict[object, tuple[Path, SetTask]] = {}
+    for task in tasks:
+        if task.status != RUN:
+            continue
+        for output in task.outputs:
+            earlier = written.setdefault(file_key(output), (output, task))
+            if earlier[1] is task and earlier[0] is output:
+                continue
+            owner = earlier[1]
+            if owner is task:
+                raise OutputError(f"{output}: set {task.index} ({task.describe()}) would "
+                                  "write it twice; give each output its own name")
+            example = output.with_name(f"{output.stem}_{{index}}{output.suffix}")
+            raise OutputError(
+                f"{output}: sets {owner.index} ({owner.describe()}) and {task.index} "
+                f"({task.describe()}) would both write it; put {{index}} or "
+                f"{{first_stem}} in the output name (e.g. {example})")
 
 
 def _with_status(task: SetTask, status: str) -> SetTask:

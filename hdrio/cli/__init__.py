@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 from hdrio import __version__
 from hdrio.cli import check, export_response
+from hdrio.cli.usage import Parser, UsageError
 from hdrio.errors import HdrioError
 
 # colour-science warns at import when Matplotlib is absent; only its plotting needs it
@@ -36,7 +37,7 @@ _LIGHT_COMMANDS = frozenset({"check", "export-response"})
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of every subcommand; of ``command``'s alone when it is one of
     :data:`_LIGHT_COMMANDS` (``hdrio check`` then never imports the merge)."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="hdrio",
         description="Merge bracketed exposures into scene-linear OpenEXR, with previews.",
     )
@@ -106,15 +107,26 @@ def _run(argv: list[str]) -> int:
         return chain.main(argv)
     parser = build_parser(argv[0])
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:
+        args, extras = parser.parse_known_args(argv)
+        if extras:
+            raise _subparser(parser, argv[0]).unknown(extras)
+    except SystemExit as exit_:  # --help, --version
         return int(exit_.code or 0)
+    except UsageError as error:
+        print(f"{error.prog}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
     try:
         return args.run(args)
     except (HdrioError, ValueError, KeyError) as error:
         message = error.args[0] if isinstance(error, KeyError) and error.args else error
         print(f"hdrio {args.command}: error: {message}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def _subparser(parser: argparse.ArgumentParser, command: str) -> Parser:
+    """The parser of ``command`` among ``parser``'s subcommands."""
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return actions[0].choices[command]
 
 
 if __name__ == "__main__":

@@ -104,7 +104,8 @@ def _merge(chain: Chain, domain: str | None) -> None:
                          read_progress=chain.progress.bar)
     chain.brackets = []
     chain.last_merge = result
-    for line in result.exposures.warnings() if result.exposures is not None else ():
+    source = result.stack.exposure_sources[0]
+    for line in result.exposures.warnings(source) if result.exposures is not None else ():
         print(f"hdrio: warning: {line}", file=sys.stderr)
     if result.exposures is not None and result.exposures.inferred:
         print(f"hdrio: exposures {result.exposures.line()}", file=sys.stderr)

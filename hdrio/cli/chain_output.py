@@ -66,6 +66,22 @@ def output_path(chain: Chain, text: str) -> Path:
     return fill_pattern(text, chain.fields or PATTERN_FIELDS)
 
 
+def claim_output(chain: Chain, text: str) -> None:
+    """Refuse an output name that an earlier output of the chain (of each set, for a
+    pattern) also names: the later write would replace the earlier one. Called by each
+    output's check, before any work."""
+    from hdrio.io.paths import file_key
+
+    path = output_path(Chain(), text)  # a pattern with stand-in fields: same if same
+    claimed = chain.settings.setdefault("_claimed", {})
+    key = file_key(path)
+    if key in claimed:
+        same = "" if claimed[key] == text else f" (as {claimed[key]})"
+        raise ChainError(f"{text}: an earlier output of this chain writes this file too"
+                         f"{same}; give each output its own name")
+    claimed[key] = text
+
+
 def _check_output(chain: Chain, text: str) -> None:
     image = chain.top()
     path = Path(text)
@@ -76,8 +92,7 @@ def _check_output(chain: Chain, text: str) -> None:
                          "(--tonemap reinhard-global) or write an .exr")
     if _pattern_free(path):
         chain.settings.setdefault("_written", []).append(str(path))
-    else:
-        output_path(Chain(), text)  # the pattern's syntax and fields, now
+    claim_output(chain, text)  # (a pattern's syntax and fields checked here, too)
 
 
 @operation("-o", "FILE", convert=_one, check=_check_output,
@@ -86,6 +101,7 @@ def _check_output(chain: Chain, text: str) -> None:
                 "PNG or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
            example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
+    from hdrio.io.paths import with_relative_sources
     from hdrio.io.write import write_exr, write_preview
     from hdrio.job.output import write_radiance
 
@@ -104,8 +120,8 @@ def _output(chain: Chain, text: str) -> None:
     elif image.display:
         pixels = image.pixels if image.alpha is None else np.concatenate(
             [image.pixels, image.alpha], axis=-1)
-        write_exr(path, pixels, image.attributes, pixel_type=data_type,
-                  compression=compression)
+        write_exr(path, pixels, with_relative_sources(image.attributes, path),
+                  pixel_type=data_type, compression=compression)
     else:
         report = merge_report(image)
         layers = {name: layer for name, layer in image.layers.items()
@@ -143,7 +159,8 @@ def _check_info(chain: Chain, _values: list[str]) -> None:
            example="out.exr --info", check=_check_info)
 def _info(chain: Chain, _values: list[str]) -> None:
     if not chain.images and chain.brackets:
-        chain.say(f"{len(chain.brackets)} brackets waiting for --merge: "
+        count = len(chain.brackets)
+        chain.say(f"{count} bracket{'' if count == 1 else 's'} waiting for --merge: "
                   + ", ".join(str(p) for p in chain.brackets))
         return
     image = chain.top()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hdrio.cli.chain_output import output_path
+from hdrio.cli.chain_output import claim_output, output_path
 from hdrio.cli.chain_registry import Chain, ChainError, operation
 from hdrio.cli.outputs import make_parent
 
@@ -19,6 +19,7 @@ def _check_name(chain: Chain, name: str) -> None:
     from hdrio.cli.outputs import check_output
 
     check_output(Path(name), {".png"}, [str(p) for p in chain.inputs])
+    claim_output(chain, name)
 
 
 def _latest_merge(chain: Chain):

@@ -154,6 +154,17 @@ class Chain:
         print(f"hdrio: note: {message}", file=sys.stderr)
 
 
+# Options of 'hdrio merge' that a chain spells otherwise.
+_MERGE_ONLY = {
+    "--preview": " (in a chain, tone-map and write it: --tonemap reinhard-global -o "
+                 "preview.jpg)",
+    "--output": " (in a chain: -o FILE)",
+    "--data-type": " (in a chain: -d TYPE)",
+    "--quiet": " (a chain is quiet unless -v is given)",
+    "-q": " (a chain is quiet unless -v is given)",
+}
+
+
 def _split(argv: Sequence[str]) -> list[tuple[str, list[str]]]:
     """Tokens into ``(operation or 'read', arguments)``, checking argument counts."""
     tokens = list(argv)
@@ -167,7 +178,11 @@ def _split(argv: Sequence[str]) -> list[tuple[str, list[str]]]:
             continue
         op = OPERATIONS.get(token)
         if op is None or op.hidden:
-            raise ChainError(f"{token}: unknown operation; 'hdrio --help' lists them")
+            from hdrio.cli.usage import nearest
+
+            known = [name for name, other in OPERATIONS.items() if not other.hidden]
+            hint = _MERGE_ONLY.get(token.split("=", 1)[0]) or nearest(token, known)
+            raise ChainError(f"{token}: unknown operation{hint}; 'hdrio --help' lists them")
         count = len(op.arguments)
         values = tokens[position: position + count]
         if len(values) < count or any(v.startswith("--") for v in values):

@@ -37,10 +37,22 @@ def add_check(sub) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    """Print each file's report; exit 2 (one line on stderr for each) when a file holds
+    NaN or infinite values, which a compositor's blur or grade spreads."""
+    import sys
+
     from hdrio.cms.checks import check_exr, format_report
 
+    faulty = []
     for index, path in enumerate(args.files):
         if index:
             print()
-        print(format_report(check_exr(Path(path), chart=args.chart, gamut=args.gamut)))
-    return 0
+        report = check_exr(Path(path), chart=args.chart, gamut=args.gamut)
+        print(format_report(report))
+        if report.non_finite:
+            faulty.append(f"{path}: {report.non_finite} of {report.pixels} pixels hold NaN "
+                          "or infinite values (hdrio reads such a file with them replaced, "
+                          "and says so)")
+    for line in faulty:
+        print(f"hdrio check: error: {line}", file=sys.stderr)
+    return 2 if faulty else 0

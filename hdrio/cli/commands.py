@@ -38,7 +38,7 @@ def add_merge(sub) -> None:
                         help="output OpenEXR file (missing folders are made)")
     parser.add_argument("-d", "--data-type", choices=["half", "float"], default="half",
                         help="EXR pixel type (default %(default)s)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     preview = parser.add_argument_group("preview")
     preview.add_argument("--preview", help="also write a tone-mapped preview (jpg, png, tif)")
     preview.add_argument("--tonemap", nargs="+", default=["reinhard-global"],
@@ -106,15 +106,30 @@ def run_merge(args: argparse.Namespace) -> int:
         pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
         display_view=display_view, observe=check.add, compile_ahead=True,
     )
-    for line in result.exposures.warnings() if result.exposures is not None else ():
+    source = result.stack.exposure_sources[0]
+    for line in result.exposures.warnings(source) if result.exposures is not None else ():
         print(f"hdrio merge: warning: {line}", file=sys.stderr)
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
-    print(summary(result, output, preview, label, args.data_type, report))
+    text = summary(result, output, preview, label, args.data_type, report)
+    if args.quiet:
+        print(written_lines(text))
+        return 0
+    print(text)
     # The written file as 'hdrio check' reads it: counted from its bands as they were
     # written, not read back.
     print(format_report(report))
     return 0
+
+
+QUIET_HELP = ("quiet: no progress, summary or check; only the lines naming the files "
+              "written, warnings and errors")
+
+
+def written_lines(summary_text: str) -> str:
+    """The ``wrote:`` and ``preview:`` lines of a summary: all that ``-q`` prints."""
+    return "\n".join(line for line in summary_text.splitlines()
+                     if line.startswith(("wrote:", "preview:")))
 
 
 def merge_check(options) -> StreamingCheck:
@@ -184,6 +199,8 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
 def motion_lines(result: MergeResult) -> list[str]:
     """The summary's ``align:`` and ``deghost:`` lines."""
     motion, lines = result.motion, []
+    if motion.too_small:
+        lines.append(f"align:     none: {motion.too_small}")
     if motion.alignment is not None:
         files = tuple(Path(name).name for name in result.stack.files)
         said = "warped" if motion.warped else "not warped"
@@ -246,11 +263,14 @@ def add_demo(sub) -> None:
         description="Render a procedural HDR scene through a known camera response (with "
                     "sensor noise and 8-bit quantisation), merge it, write the EXR and a "
                     "preview, and print the error against the ground truth.",
-        epilog="example: hdrio demo -o demo_out",
+        epilog="example: hdrio demo -o hdrio_demo",
     )
     parser.add_argument("-o", "--output-dir", default="hdrio_demo",
                         help="folder for brackets, EXR and preview (default %(default)s)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="quiet: no progress or summary; only the lines naming the "
+                             "files written, the comparison with the truth (truth, bound, "
+                             "verdict), warnings and errors")
     parser.set_defaults(run=run_demo)
 
 
@@ -272,8 +292,9 @@ def run_demo(args: argparse.Namespace) -> int:
     result = merge_files(files, output, preview=preview, progress=progress.step,
                          read_progress=progress.bar, options=options, observe=check.add,
                          compile_ahead=True)
-    print(summary(result, output, preview, "reinhard-global", "half",
-                  merge_report(check, result, output)))
+    text = summary(result, output, preview, "reinhard-global", "half",
+                   merge_report(check, result, output))
+    print(written_lines(text) if args.quiet else text)
     mask = well_exposed(result.stack.codes, result.stack.code_max)
     error = radiance_error(result.radiance, truth, mask)
     print(f"truth:     relative radiance error after one global scale, on the "

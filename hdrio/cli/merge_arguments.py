@@ -174,7 +174,8 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--align", ("MODE",), "align", choice(*ALIGN_MODES), example=("off",),
            help="register the brackets to the best-exposed one: auto (measure; warp only if "
                 "some bracket moved more than 0.1 px; a bracket too clipped to register "
-                "is left unwarped and named), off, or a model to warp with (default auto)"),
+                "is left unwarped and named), off, or a model to warp with: translation, "
+                "euclidean or homography (default auto)"),
     Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
                 "people, leaves): auto or off (default auto)"),
@@ -187,10 +188,13 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--saturation", ("POLICY",), "saturation", choice(*SATURATION_POLICIES),
            example=("pixel",),
            help="which observations near clipping are dropped, from their bracket and "
-                "every longer one: 'safe' (default: the whole observation unless every "
-                "channel is safely below its own white level, found in the data), "
-                "'pixel' (the tutorial's: any channel at the top code) or 'channel' (a "
-                "channel at the top code alone; wrong hues where a camera mixes channels)"),
+                "every longer one: 'auto' (default: as 'safe' where the stack shows its "
+                "channels mixed after the clip, a camera's colour matrix or JPEG, else a "
+                "channel at its own white level alone), 'safe' (the whole observation "
+                "unless every channel is safely below its own white level, found in the "
+                "data), 'pixel' (the tutorial's: any channel at the top code) or 'channel' "
+                "(a channel at the top code alone; wrong hues where a camera mixes "
+                "channels); docs/highlights.md"),
     Option("--clip-mask", (), "clip_mask", flag, example=(),
            help="also write the pixels clipped in every bracket (merged to a neutral "
                 "lower bound) as the EXR channel clipped.Y, counted by hdrio check"),

@@ -80,18 +80,27 @@ def check_inputs(paths: Sequence[str | Path], what: str = "an image file") -> li
     return checked
 
 
-def _same_file(path: Path, other: Path) -> bool:
+def file_key(path: str | Path) -> tuple[int, int] | str:
+    """What identifies the file ``path`` names: its device and inode when it exists
+    (links and hard links included), else its resolved name (``..`` and linked folders
+    resolved). Two paths name one file exactly when their keys are equal."""
     try:
-        return os.path.samefile(path, other)
-    except OSError:  # either is missing (or unreachable): compare the names
-        return os.path.realpath(path) == os.path.realpath(other)
+        info = os.stat(path)
+    except OSError:  # missing (or unreachable): the name is all there is
+        return os.path.realpath(path)
+    return info.st_dev, info.st_ino
+
+
+def same_file(path: str | Path, other: str | Path) -> bool:
+    """Whether two paths name one file (see :func:`file_key`)."""
+    return file_key(path) == file_key(other)
 
 
 def check_not_an_input(path: str | Path, inputs: Iterable[str | Path]) -> None:
     """Refuse an output that is one of ``inputs`` (by name, link or hard link)."""
     path = Path(path)
     for source in inputs:
-        if _same_file(path, Path(source)):
+        if same_file(path, Path(source)):
             also = "" if str(source) == str(path) else f" ({source})"
             raise OutputError(f"{path}: output would overwrite an input{also}; choose "
                               "another name")
@@ -152,7 +161,7 @@ def check_outputs(outputs: Iterable[tuple[str | Path, Iterable[str] | None]],
     seen: list[Path] = []
     for path, suffixes in outputs:
         path = check_output(path, inputs, suffixes)
-        if any(_same_file(path, other) for other in seen):
+        if any(same_file(path, other) for other in seen):
             raise OutputError(f"{path}: named twice as an output")
         seen.append(path)
 
@@ -185,3 +194,38 @@ def fill_pattern(text: str | Path, fields: Mapping[str, object]) -> Path:
         raise OutputError(f"a brace that is not part of a field {{name}} in the output "
                           f"name; use {known}")
     return Path(_FIELD.sub(field, text))
+
+
+# Header attributes that name input files: stored resolved (absolute, links followed), and
+# beside each, under the same name plus "Relative", relative to the EXR's own folder, so
+# that a moved folder (a shot copied to a farm node) still finds its sources.
+SOURCE_ATTRIBUTES = ("hdrio:sourceFiles", "hdrio:alignReference")
+
+
+def resolved(path: str | Path) -> str:
+    """``path`` absolute, with links and ``..`` resolved (as a header stores it)."""
+    return str(Path(path).resolve())
+
+
+def relative_to_output(path: str | Path, output: str | Path) -> str:
+    """``path`` relative to the folder of ``output`` (both resolved); ``path`` resolved
+    when there is no relative path (another drive)."""
+    try:
+        return os.path.relpath(resolved(path), Path(output).resolve().parent)
+    except ValueError:
+        return resolved(path)
+
+
+def with_relative_sources(attributes: Mapping[str, object], output: str | Path
+                          ) -> dict[str, object]:
+    """``attributes`` plus ``NAMERelative`` for each of :data:`SOURCE_ATTRIBUTES` present:
+    its paths relative to the folder ``output`` is written in (a list stays a list)."""
+    extended = dict(attributes)
+    for name in SOURCE_ATTRIBUTES:
+        value = getattr(attributes.get(name), "value", attributes.get(name))
+        if isinstance(value, str) and value:
+            extended[f"{name}Relative"] = relative_to_output(value, output)
+        elif isinstance(value, list | tuple) and value:
+            extended[f"{name}Relative"] = [relative_to_output(v, output) for v in value]
+    return extended
+

@@ -12,6 +12,7 @@ import numpy as np
 
 from hdrio import __version__
 from hdrio.cms.colour_stage import colour_attributes, output_radiance
+from hdrio.io.paths import resolved, with_relative_sources
 from hdrio.io.write import HALF_MAX, write_exr
 from hdrio.job.result import MergeResult
 from hdrio.merge.weighted_mean import MergeStatistics, clipped_everywhere_mask
@@ -39,7 +40,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:version": __version__,
         "hdrio:units": "relative",
         "hdrio:exposureScale": float(result.exposure_scale),
-        "hdrio:sourceFiles": [str(name) for name in stack.files],
+        "hdrio:sourceFiles": [resolved(name) for name in stack.files],
         # Decimal text: a float list of 2, 3, 9 or 16 would become an EXR vector/matrix.
         "hdrio:exposures": [exposure_text(t) for t in stack.exposures],
         "hdrio:exposureSource": stack.exposure_sources[0],
@@ -146,7 +147,7 @@ def motion_attributes(result: MergeResult) -> dict[str, object]:
     if motion.alignment is not None:
         alignment = motion.alignment
         attributes["hdrio:alignModel"] = alignment.model
-        attributes["hdrio:alignReference"] = str(result.stack.files[alignment.reference])
+        attributes["hdrio:alignReference"] = resolved(result.stack.files[alignment.reference])
         attributes["hdrio:alignWarped"] = int(motion.warped)
         attributes["hdrio:alignTransforms"] = [
             " ".join(f"{v:.6g}" for v in warp.reshape(-1)[:8])
@@ -195,10 +196,11 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
     ``hdrio:exposureScale`` (and ``whiteLuminance`` for absolute units) record it times
     the half-range factor, which is returned. ``alpha`` ``(H, W, 1)``, when given, is
     written unscaled as channel A. ``observe`` sees each band as stored. ``layers``: extra
-    unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``.
+    unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``. Source
+    paths get their copies relative to ``path`` (:func:`hdrio.io.paths.with_relative_sources`).
     """
     extra = half_safe_scale(pixels) if pixel_type == "half" else 1.0
-    attributes = dict(attributes)
+    attributes = with_relative_sources(attributes, path)
     attributes["hdrio:exposureScale"] = float(scale * extra)
     if "whiteLuminance" in attributes:  # OpenEXR: cd/m^2 of RGB (1, 1, 1) as stored
         attributes["whiteLuminance"] = 1.0 / float(scale * extra)

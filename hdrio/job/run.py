@@ -137,7 +137,7 @@ def _read_and_merge(paths: Sequence[str | Path], plan: MergePlan, *,
     if options.response_from is not None and "response" in skips:
         response = read_response(options.response_from)
     start = time.perf_counter()
-    say(f"reading {len(paths)} brackets")
+    say(f"reading {len(paths)} bracket{'' if len(paths) == 1 else 's'}")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
                           progress=read_progress, white_balance=options.raw_multipliers,
                           skip_brackets="brackets" in skips,

@@ -163,9 +163,11 @@ class ExposureCheck:
         """``log2(estimated / metadata)`` per bracket."""
         return np.log2(self.estimated / self.metadata)
 
-    def warnings(self) -> list[str]:
-        """One line per bracket off by more than :data:`WARN_STOPS`, naming its file
-        (none when there was no metadata to be off)."""
+    def warnings(self, source: str = "") -> list[str]:
+        """One line per bracket off by more than :data:`WARN_STOPS`, naming its file and
+        where its exposure came from (``source``: the stack's exposure source, ``exif``,
+        ``sidecar``...); none when there was no metadata to be off."""
+        said = _SAID_IN.get(source, "in the metadata")
         lines: list[str] = []
         if self.inferred and self.exif is None:
             return lines
@@ -174,7 +176,7 @@ class ExposureCheck:
             stops = math.log2(data / meta) if math.isfinite(meta) else 0.0
             if abs(stops) > WARN_STOPS:
                 lines.append(
-                    f"{Path(name).name}: exposure {_text(meta)} in the metadata, the data "
+                    f"{Path(name).name}: exposure {_text(meta)} {said}, the data "
                     f"say {_text(data)} ({stops:+.2f} stop); "
                     + ("used the data's (--exposures-from-data)" if self.used
                        else "--exposures-from-data uses the data's"))
@@ -223,6 +225,11 @@ class ExposureCheck:
         """Names of the brackets whose EXIF gave their exposure (with ``exif``)."""
         return [Path(name).name for name, t in zip(self.files, self.exif)
                 if math.isfinite(t)] if self.exif is not None else []
+
+
+# Where a stack's exposures were read (hdrio.stack.ExposureStack.exposure_sources).
+_SAID_IN = {"exif": "in the EXIF", "sidecar": "in the exposure list (--exposures-from)",
+            "filename": "in the file name", "explicit": "given by --exposures"}
 
 
 def _text(t: float) -> str:

@@ -42,7 +42,12 @@ from collections.abc import Callable
 import numpy as np
 import scipy.ndimage
 
-from hdrio.radiometry.luminance import DEFAULT_SPACE, DELTA, luminance_weights
+from hdrio.radiometry.luminance import (
+    DEFAULT_SPACE,
+    DELTA,
+    log_average_luminance,
+    luminance_weights,
+)
 
 SCALE_RATIO = 1.6
 SCALES = 8
@@ -191,10 +196,16 @@ def _tutorial_luminance(hdr: np.ndarray) -> np.ndarray:
 
 def tonemap_Reinhard2002_global_tutorial(hdr: np.ndarray, a: float = 0.72,
                                          saturation: float = 0.6) -> np.ndarray:
-    """The tutorial's ``reinhardGlobal.m`` (float64; ``NaN`` where luminance is 0, as there)."""
+    """The tutorial's ``reinhardGlobal.m`` (float64; ``NaN`` where luminance is 0, as there).
+
+    The key counts negative luminance as 0, as the paper variants do (the listing takes
+    the log of ``L + delta``, which a pixel below ``-delta`` would make NaN, and with it
+    the whole picture); where luminance is not positive the result is NaN, which the
+    preview shows black (:func:`hdrio.tonemap.preview.render_preview`).
+    """
     hdr = np.asarray(hdr, dtype=np.float64)
     L = _tutorial_luminance(hdr)
-    key = np.exp(np.mean(np.log(L + DELTA)))
+    key = log_average_luminance(L)
     scaled = L * (a / key)
     compressed = scaled / (scaled + 1.0)
     ldr = (hdr / L[..., None]) ** saturation * compressed[..., None]

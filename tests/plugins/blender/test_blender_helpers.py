@@ -106,6 +106,7 @@ def assert_node_is_hdrio_merge(label, codes, exposures, response, reference, noi
     assert difference.max() <= 1e-5
 
 
+@pytest.mark.slow
 def test_baked_tables_are_hdrio_default_merge_on_synthetic_brackets(write_brackets):
     paths = write_brackets((1 / 16, 1 / 4, 1.0, 4.0), size=(40, 96))
     stack = read_brackets(paths)
@@ -298,6 +299,7 @@ def test_warmup_reports_a_failure_and_finishes():
     assert warmup.status() == "hdrio: kernel warm-up failed (RuntimeError: no compiler)"
 
 
+@pytest.mark.slow
 def test_warmup_steps_compile_hdrio_kernels():
     warmup = KernelWarmup()
     warmup.start()

@@ -5,6 +5,8 @@ Run by ``plugins/blender/ci/run_tests.sh``; the main suite has no ``bpy`` and sk
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -188,7 +190,7 @@ def test_merge_to_exr_matches_hdrio_merge_command(shared_data, tmp_path):
     # Everything in the header but the time of writing (OpenImageIO stamps DateTime).
     assert attributes.pop("DateTime") and cli_attributes.pop("DateTime")
     assert attributes == cli_attributes
-    assert attributes["hdrio:sourceFiles"] == tuple(paths)
+    assert attributes["hdrio:sourceFiles"] == tuple(str(Path(p).resolve()) for p in paths)
     loaded = [n for n in tree.nodes if n.bl_idname == "CompositorNodeImage"]
     assert [bpy.path.abspath(n.image.filepath) for n in loaded] == [str(blender_output)]
 
