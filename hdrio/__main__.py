@@ -1,7 +1,5 @@
-"""``python -m hdrio``: the ``hdrio`` command (:func:`hdrio.cli.main`)."""
+"""``python -m hdrio``: the ``hdrio`` command (:func:`hdrio.cli.run`)."""
 
-import sys
+from hdrio.cli import run
 
-from hdrio.cli import main
-
-sys.exit(main())
+run()

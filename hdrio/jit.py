@@ -25,6 +25,17 @@ costs about 0.05 s of a first run's compile), and no cache file of its own to wr
 cached kernel holds the code of every helper it calls. Such a helper cannot be called
 from Python."""
 
+def size_numba_threads() -> None:
+    """numba's parallel kernels (``parallel=True``) on this process's budget
+    (:func:`hdrio.parallel.threads`) rather than on every CPU of the machine: called
+    before each such kernel, since a farm worker's budget is a share of the machine."""
+    import numba
+
+    from hdrio.parallel import threads
+
+    numba.set_num_threads(max(1, min(threads(), numba.config.NUMBA_NUM_THREADS)))
+
+
 STAGES: dict[str, tuple[str, ...]] = {
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.deghost:_consistency"),

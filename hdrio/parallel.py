@@ -30,6 +30,19 @@ def threads() -> int:
     return max(1, os.cpu_count() or 1)
 
 
+def worker_environment(count: int) -> dict[str, str]:
+    """The environment of a worker process given ``count`` of the machine's CPUs (a farm
+    worker, a process of ``--group``'s pool, a Dask worker): hdrio's own kernels
+    (``HDRIO_THREADS``), numba's parallel kernels and any OpenMP or BLAS pool a library
+    starts are all sized to it, so that workers sharing a machine never run more threads
+    than it has cores. OpenImageIO's and OpenEXR's pools follow ``HDRIO_THREADS``
+    (:func:`hdrio.io.native.size_thread_pools`)."""
+    value = str(max(1, int(count)))
+    return {name: value for name in ("HDRIO_THREADS", "NUMBA_NUM_THREADS",
+                                     "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                     "MKL_NUM_THREADS")}
+
+
 def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
     """``kernel(start, stop, *args)`` over tasks ``0 .. tasks - 1``, in chunks of
     consecutive tasks (eight per thread) that the threads take from a queue as they

@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.ndimage
 
 from hdrio.align.lucaskanade import (
     corner_motion,
@@ -179,6 +178,7 @@ def _pyramid(base: BaseImage, levels: int) -> list[tuple[np.ndarray, np.ndarray]
     """``(log radiance, valid)`` from the base up. Each level is smoothed by a Gaussian of
     :data:`SMOOTHING` pixels for the refinement: bilinear sampling of a sharp image
     biases Lucas-Kanade towards whole pixels (0.08 px on the truth stacks without)."""
+    import scipy.ndimage
     out = [(base.log, base.valid)]
     for _ in range(levels):
         image, valid = out[-1]
@@ -349,6 +349,7 @@ def align_masks(masks: np.ndarray, alignment: Alignment) -> np.ndarray:
     moved onto the reference as :func:`align_stack` moves the codes: the nearest pixel,
     grown by 2 pixels, the reach of the cubic interpolation (a warped code within it
     took some of an excluded one)."""
+    import scipy.ndimage
     out = masks.copy()
     for j in range(masks.shape[0]):
         if j == alignment.reference or alignment.motion[j] == 0.0:
@@ -391,6 +392,7 @@ def sharp_edges(codes: np.ndarray, code_max: int, step: int = 1) -> np.ndarray:
     than :data:`EDGE_CODES` (mean of channels). With ``step`` > 1 the test is made on
     every ``step``-th pixel each way (neighbourhoods ``step`` times wider: more pixels
     excluded, ``step^2`` times less work) and each result repeated over its block."""
+    import scipy.ndimage
     height, width = codes.shape[:2]
     grey = codes[::step, ::step].mean(axis=-1, dtype=np.float32)
     spread = scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)

@@ -44,7 +44,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.ndimage
 from numba import njit
 
 from hdrio.align import shares
@@ -250,6 +249,7 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
     (:func:`hdrio.merge.masked.remerge_masked` with the merge's tables, its cells of
     ``cell`` pixels). Staged brackets' pages are given back after each band.
     """
+    import scipy.ndimage
     count, height, width, channels = codes.shape
     limits = np.asarray(limits)
     rows, cols = -(-height // cell), -(-width // cell)

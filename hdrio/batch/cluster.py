@@ -54,14 +54,14 @@ def local_cluster(workers: int | None = None) -> Any:
     """
     import dask
 
-    from hdrio.parallel import threads
+    from hdrio.parallel import threads, worker_environment
 
     distributed = _distributed()
     workers = workers or threads()
     with dask.config.set({f"{_PRE_SPAWN}.{_TRIM}": None}):
         return distributed.LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True,
-            dashboard_address=":0", env={"HDRIO_THREADS": str(worker_threads(workers))})
+            dashboard_address=":0", env=worker_environment(worker_threads(workers)))
 
 
 def run_dask(tasks: Sequence[SetTask], work: Work, client: Any,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from hdrio.batch.journal import record_done
 from hdrio.batch.partial import clean_partials
 from hdrio.batch.tasks import SetTask
-from hdrio.parallel import die_with_parent
+from hdrio.parallel import die_with_parent, worker_environment
 
 Work = Callable[[SetTask], tuple[bool, str]]
 OnResult = Callable[["SetResult", int, int], None]
@@ -108,7 +108,8 @@ def worker_threads(workers: int) -> int:
 
 def _start_worker(parent_pid: int, threads: int) -> None:
     die_with_parent(parent_pid)
-    os.environ.setdefault("HDRIO_THREADS", str(threads))
+    for name, value in worker_environment(threads).items():
+        os.environ.setdefault(name, value)
 
 
 def run_local(tasks: Sequence[SetTask], work: Work, workers: int,

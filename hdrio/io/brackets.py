@@ -20,10 +20,11 @@ from hdrio.io.exposure import (
     read_exposure_table,
     relative_exif_exposures,
 )
-from hdrio.io.native import quiet_native_stderr
+from hdrio.io.native import quiet_native_stderr, size_thread_pools
 from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
+from hdrio.parallel import threads
 from hdrio.skips import classify
 from hdrio.stack import ExposureStack
 
@@ -176,9 +177,10 @@ def read_brackets(
         Stop decoding once a bracket has every code value well exposed, and keep only it
         (for a merge with a saved response: :mod:`hdrio.skips`, ``covered``).
 
-    Brackets are decoded from the middle of the exposure ladder outwards, two at a time
-    (one towards each end), each straight into its slot of one array, staged in a
-    temporary file beyond the memory budget (:mod:`hdrio.io.staging`).
+    Brackets are decoded from the middle of the exposure ladder outwards, as many at a
+    time as the process has threads (:func:`hdrio.parallel.threads`), each straight into
+    its slot of one array, staged in a temporary file beyond the memory budget
+    (:mod:`hdrio.io.staging`).
 
     Without either, EXIF is used when every file has an exposure time, else the
     file-name convention when every name has one. Raises :class:`InputError` naming the
@@ -195,6 +197,7 @@ def read_brackets(
     if all(raw):
         return _raw_stack(paths, exposures, exposures_from, progress, white_balance,
                           infer_exposures)
+    size_thread_pools()
     # Headers first: sizes and exposures are checked before any pixel is decoded, and
     # each bracket is then decoded straight into its slot of one array, in exposure
     # order (peak memory: the stack plus one band of rows).
@@ -220,6 +223,7 @@ def read_brackets(
     found: list[int] = []  # a covering bracket, when stop_when_covered
     lock = threading.Lock()
     done = [0]
+    decoded: set[int] = set()
 
     def decode(position: int) -> None:
         j = order[position]
@@ -230,35 +234,51 @@ def read_brackets(
         kinds[position] = classify(codes[position], first.code_max)
         release(codes, position)
         with lock:
+            decoded.add(position)
             if skip_brackets:
                 _drop_beyond(position, kinds[position], count, kept, reasons)
-            if stop_when_covered and kinds[position] == "covers" and not found:
+            if stop_when_covered and kinds[position] == "covers":
                 found.append(position)
             done[0] += 1
             if progress:
                 progress(done[0], count, str(paths[j]))
 
-    def chain(positions: list[int]) -> None:
-        for position in positions:
-            with lock:
-                wanted = kept[0] <= position < kept[1] and not found
-            if wanted:
-                decode(position)
-
-    # Two chains from the middle outwards, one towards the shortest exposure and one
-    # towards the longest, decoded at once (OpenImageIO releases the GIL while decoding):
-    # each stops where its side turns all dark or all bright.
+    # From the middle of the ladder outwards, alternating sides (nearest first), on as
+    # many threads as the process may use (OpenImageIO releases the GIL while decoding):
+    # each side stops where it turns all dark or all bright, and a bracket beyond that is
+    # not decoded unless a thread had already started it.
     middle = count // 2
-    sides = ([*range(middle, -1, -1)], [*range(middle + 1, count)])
+    queue = _outwards(middle, count)
     if stop_when_covered:  # the middle bracket alone first: the likeliest to cover
-        decode(middle)
-        sides = (sides[0][1:], sides[1])
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="hdrio-read") as pool:
-        for future in [pool.submit(chain, side) for side in sides]:
+        decode(queue.pop(0))
+
+    failed: list[BaseException] = []
+
+    def worker() -> None:
+        while True:
+            with lock:
+                position = next((p for p in queue if kept[0] <= p < kept[1]), None)
+                if position is None or found or failed:
+                    return  # nothing left, a covering bracket found, or a file at fault
+                queue.remove(position)
+            try:
+                decode(position)
+            except BaseException as error:
+                failed.append(error)
+                raise
+
+    workers = max(1, min(threads(), len(queue)))
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio-read") as pool:
+        for future in [pool.submit(worker) for _ in range(workers)]:
             future.result()
-    covering = found[0] if found else None
+    # Of two covering brackets decoded at once, the one nearest the middle, whichever
+    # thread found it first.
+    covering = min(found, key=_outwards(middle, count).index) if found else None
     if covering is not None:
         kept = [covering, covering + 1]
+    for p in decoded:  # decoded ahead by a thread before its side turned dark or bright
+        if p in reasons and reasons[p].endswith(": not decoded"):
+            reasons[p] = reasons[p].replace(": not decoded", ": decoded ahead, not used")
     names = [str(paths[j]) for j in order]
     dropped = tuple((names[p], reasons.get(p) or
                      f"not needed: {Path(names[covering]).name} covers the range")
@@ -274,6 +294,16 @@ def read_brackets(
         dropped=dropped,
         kinds=kinds[chosen],
     )
+
+
+def _outwards(middle: int, count: int) -> list[int]:
+    """Positions ``0 .. count - 1`` from ``middle`` outwards, alternating sides: ``middle,
+    middle + 1, middle - 1, middle + 2, ...``."""
+    longer, shorter = list(range(middle + 1, count)), list(range(middle - 1, -1, -1))
+    interleaved = [middle]
+    for k in range(max(len(longer), len(shorter))):
+        interleaved += longer[k:k + 1] + shorter[k:k + 1]
+    return interleaved
 
 
 def _drop_beyond(position: int, kind: str, count: int, kept: list[int],

@@ -14,6 +14,25 @@ _quiet: dict[str, dict] = {name: {"depth": 0, "saved": -1, "sink": None}
                            for name in ("stdout", "stderr")}
 
 
+_POOLS_SIZED: list[int] = []
+
+
+def size_thread_pools() -> None:
+    """OpenImageIO's thread pool and its OpenEXR's (compression, decompression) sized to
+    this process's budget (:func:`hdrio.parallel.threads`: a farm worker's share of the
+    machine, else every CPU it may use); set again only when the budget changed."""
+    from hdrio.parallel import threads
+
+    count = threads()
+    if _POOLS_SIZED[-1:] == [count]:
+        return
+    import OpenImageIO as oiio
+
+    oiio.attribute("threads", count)
+    oiio.attribute("exr_threads", count)
+    _POOLS_SIZED.append(count)
+
+
 @contextlib.contextmanager
 def quiet_native_stderr() -> Iterator[None]:
     """Swallow what C libraries (libpng, libjpeg) print on fd 2 while decoding.

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.errors import OutputError, library_message
-from hdrio.parallel import read_ahead
+from hdrio.io.native import size_thread_pools
+from hdrio.parallel import read_ahead, threads
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
@@ -75,7 +76,11 @@ def _type_of(value) -> tuple[str, object]:
     raise TypeError(f"cannot store attribute value {value!r}")
 
 
-_ROWS_PER_WRITE = 64
+def rows_per_write() -> int:
+    """Rows handed to the writer at once: four of OpenEXR's 16-row ZIP blocks per thread
+    of the budget (at least 64 rows), so that every thread of its pool compresses a block
+    of each band (64 rows kept 4 threads busy, whatever the machine)."""
+    return 16 * 4 * max(1, threads())
 
 
 # The writer's host (letters, digits and '-') and process id are in the temporary name,
@@ -172,13 +177,14 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 channel_names: Sequence[str] | None = None) -> Path:
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
-    Rows go out in bands of 64, each through ``band`` first when given (a conversion
-    applied band by band needs no full-size copy of the image). ``pixels`` may be any
+    Rows go out in bands (:func:`rows_per_write`), each through ``band`` first when given
+    (a conversion applied band by band needs no full-size copy of the image). ``pixels`` may be any
     object with ``shape`` whose row slices are arrays. ``channel_names`` replaces
     OpenImageIO's defaults; one channel is named ``Y`` (OpenEXR's luminance).
     """
     import OpenImageIO as oiio
 
+    size_thread_pools()
     path = Path(path)
     height, width, channels = pixels.shape
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
@@ -199,8 +205,9 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
             if not output.open(str(temp), spec):
                 raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
             def bands():
-                for top in range(0, height, _ROWS_PER_WRITE):
-                    rows = pixels[top: top + _ROWS_PER_WRITE]
+                step = rows_per_write()
+                for top in range(0, height, step):
+                    rows = pixels[top: top + step]
                     yield top, np.ascontiguousarray(band(rows) if band is not None else rows)
 
             # The next band is converted (and observed) while this one is compressed.

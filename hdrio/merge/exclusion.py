@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.ndimage
 
 from hdrio.merge.masked import remerge_masked
 from hdrio.merge.weighted_mean import MergeStatistics
@@ -45,6 +44,7 @@ def pixel_keep(excluded: np.ndarray, motion_keep: np.ndarray | None, cell: int) 
     """``(P, H, W)`` float32 keep weights per pixel: 0 where excluded, times the
     deghosting's cell weights ``motion_keep`` ``(P, rows, cols)`` interpolated bilinearly
     between cell centres (as :func:`hdrio.merge.masked.remerge_masked` does)."""
+    import scipy.ndimage
     keep = (~excluded).astype(np.float32)
     if motion_keep is not None:
         height, width = excluded.shape[1:]

@@ -48,7 +48,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 HIGHLIGHT_MODES = ("clip", "reconstruct")
 HIGHLIGHT_HELP = {
@@ -98,6 +97,7 @@ def clip_groups(mask: np.ndarray, block: int = BLOCK):
     region and its ring lie in one group; two groups' boxes may overlap, their ``own``
     pixels never do.
     """
+    from scipy import ndimage
     height, width = mask.shape
     rows, cols = -(-height // block), -(-width // block)
     padded = np.zeros((rows * block, cols * block), dtype=bool)
@@ -136,6 +136,7 @@ def border_chromaticity(values: np.ndarray, mask: np.ndarray,
     regions : int
         The number of regions.
     """
+    from scipy import ndimage
     labels, regions = ndimage.label(mask, structure=_EIGHT)
     gap, width = RING
     outer = ndimage.maximum_filter(labels, size=2 * width + 1)  # the region within 8 px

@@ -27,9 +27,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.ndimage
 from numba import njit, prange
 
+from hdrio.jit import size_numba_threads
 from hdrio.merge.kernel import FLOAT32_MAX, FLOAT32_TINY, LOG_FLOAT32_MAX, LOG_FLOAT32_TINY
 
 
@@ -131,6 +131,7 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         the band, cols)`` multiply the keep weights per cell, not interpolated
         (:mod:`hdrio.align.resampling`); the cells where one is below 1 are re-merged too.
     """
+    import scipy.ndimage
     rows = codes.shape[1] - first_row if rows is None else rows
     start, stop = first_row // cell, -(-(first_row + rows) // cell)
     above = max(0, start - 1)  # the band's cells and their neighbours
@@ -151,6 +152,7 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     terms = np.array(terms, np.complex128)  # a copy: dropped codes never count
     for c, limit in enumerate(limits):
         terms[:, c, limit:] = 0.0
+    size_numba_threads()
     _remerge(codes, np.ascontiguousarray(
         keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
              terms, np.ascontiguousarray(estimates, np.float64), limits, per_channel,

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hdrio.parallel import threads
+from hdrio.jit import size_numba_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, observation_variance
 from hdrio.radiometry.tables import estimate_tables
@@ -86,7 +86,6 @@ def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
     ``weights``: the merge's weights, ``(P, C, levels)`` or ``(1, C, levels)`` (a code
     weighting shared by every bracket), zero at ``Z_max``.
     """
-    import numba
 
     count, height, width, channels = stack.codes.shape
     weights = np.ascontiguousarray(np.broadcast_to(
@@ -96,7 +95,7 @@ def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
     estimates = np.ascontiguousarray(
         estimate_tables(response, stack.channel_exposures, "linear").transpose(0, 2, 1))
     out = np.empty((height, width * channels), dtype=np.float32)
-    numba.set_num_threads(min(threads(), numba.config.NUMBA_NUM_THREADS))
+    size_numba_threads()
     _uncertainty_kernel(stack.codes.reshape(count, height, width * channels), weights,
                         variances, estimates, stack.code_max, saturation == "channel",
                         domain == "log", out)

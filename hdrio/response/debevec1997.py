@@ -33,9 +33,9 @@ photographs. SIGGRAPH 97, 369-378. doi:10.1145/258734.258884
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from hdrio.errors import ResponseSolveError
 from hdrio.radiometry.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
@@ -51,6 +51,9 @@ from hdrio.response.sampling import (
     sample_codes,
     tutorial_sample_count,
 )
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 DEFAULT_SMOOTHING = 50.0
 _REFINED = 1e-12  # a refinement step this small (relative to g's range) ends refinement
@@ -72,6 +75,8 @@ def debevec1997_system(Z, log_exposures, smoothing: float, weights,
     constant to ``g`` and every ``ln E`` changes no other row, so that row is met
     exactly and its weight does not change the solution; only the conditioning.
     """
+    import scipy.sparse as sp  # the tutorial's system only: the default solve is dense
+
     Z = np.asarray(Z, dtype=np.int64)
     weights = np.asarray(weights, dtype=np.float64)
     n = weights.size

@@ -40,7 +40,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-import scipy.ndimage
 
 from hdrio.radiometry.luminance import (
     DEFAULT_SPACE,
@@ -185,6 +184,7 @@ def fspecial_gaussian(sigma: float) -> np.ndarray:
 
 
 def _gaussian_zero_padded(image: np.ndarray, sigma: float) -> np.ndarray:
+    import scipy.ndimage
     kernel = fspecial_gaussian(sigma)
     rows = scipy.ndimage.convolve1d(image, kernel, axis=0, mode="constant", cval=0.0)
     return scipy.ndimage.convolve1d(rows, kernel, axis=1, mode="constant", cval=0.0)

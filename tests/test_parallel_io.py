@@ -1,0 +1,124 @@
+"""The machine shared out: brackets decoded on every thread of the budget, the same
+stack whatever the budget; OpenImageIO's and OpenEXR's pools and numba's sized to it; a
+worker's environment that sizes every pool; the command ending without the
+interpreter's teardown, its output and exit code intact."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hdrio.io.brackets import read_brackets
+from hdrio.io.write import rows_per_write, write_exr
+from hdrio.parallel import threads, worker_environment
+
+SEVEN = (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0, 4.0, 16.0)
+
+
+@pytest.mark.parametrize("budget", ["1", "2", "5", "16"])
+def test_the_stack_does_not_depend_on_the_thread_budget(write_brackets, monkeypatch, budget):
+    paths = write_brackets(SEVEN, size=(40, 56))
+    monkeypatch.setenv("HDRIO_THREADS", "1")
+    serial = read_brackets(paths[::-1])  # given in any order: sorted by exposure
+    monkeypatch.setenv("HDRIO_THREADS", budget)
+    parallel = read_brackets(paths[::-1])
+    np.testing.assert_array_equal(parallel.codes, serial.codes)
+    assert parallel.files == serial.files and parallel.kinds == serial.kinds
+    np.testing.assert_array_equal(parallel.exposures, serial.exposures)
+
+
+def test_brackets_beyond_an_all_dark_one_are_dropped_on_any_budget(write_brackets,
+                                                                    monkeypatch):
+    # The ramp is all dark at 2^-17 s and darker still below: both shorter brackets go,
+    # each named with a reason that is true whether a thread decoded the shortest ahead
+    # (it is all dark too) or not (one budget, one thread a side: never decoded).
+    exposures = (2.0**-20, 2.0**-17, 1 / 16, 1 / 4, 1.0, 4.0)
+    paths = write_brackets(exposures, size=(40, 56), names=[f"b{j}.png" for j in range(6)])
+    for budget in ("1", "6"):
+        monkeypatch.setenv("HDRIO_THREADS", budget)
+        stack = read_brackets(paths, exposures=exposures)
+        assert stack.count == 4, budget
+        reasons = dict(stack.dropped)
+        assert reasons[str(paths[1])] == "no well-exposed pixel (all dark)", reasons
+        assert reasons[str(paths[0])] in (  # true whichever a thread got to first
+            "shorter than an all-dark bracket: not decoded",
+            "shorter than an all-dark bracket: decoded ahead, not used",
+            "no well-exposed pixel (all dark)"), reasons
+
+
+def test_a_bad_file_is_named_on_any_budget(write_brackets, monkeypatch, tmp_path):
+    from hdrio.errors import InputError
+
+    paths = write_brackets(SEVEN, size=(40, 56))
+    paths[2].write_bytes(paths[2].read_bytes()[:200])  # truncated PNG
+    monkeypatch.setenv("HDRIO_THREADS", "7")
+    with pytest.raises(InputError, match=paths[2].name):
+        read_brackets(paths)
+
+
+def test_openimageio_pools_follow_the_budget(write_brackets, monkeypatch):
+    import OpenImageIO as oiio
+
+    paths = write_brackets(size=(16, 16))
+    for budget in ("3", "1"):
+        monkeypatch.setenv("HDRIO_THREADS", budget)
+        read_brackets(paths)
+        assert oiio.get_int_attribute("threads") == int(budget)
+        assert oiio.get_int_attribute("exr_threads") == int(budget)
+
+
+def test_the_exr_is_the_same_file_whatever_the_write_bands(tmp_path, monkeypatch):
+    # Bands of 64 rows (one thread) or 1024 (16 threads): OpenEXR compresses the same
+    # 16-row blocks, so the file's bytes are the same.
+    rng = np.random.default_rng(0)
+    rgb = rng.gamma(2.0, 1.0, (700, 90, 3)).astype(np.float32)
+    written = {}
+    for budget in ("1", "16"):
+        monkeypatch.setenv("HDRIO_THREADS", budget)
+        assert rows_per_write() == 64 * int(budget)
+        path = tmp_path / f"band{budget}.exr"
+        write_exr(path, rgb, {"hdrio:units": "relative"})
+        written[budget] = path.read_bytes()
+    assert written["1"] == written["16"]
+
+
+def test_a_worker_environment_sizes_every_pool():
+    environment = worker_environment(3)
+    assert environment["HDRIO_THREADS"] == environment["NUMBA_NUM_THREADS"] == "3"
+    assert environment["OMP_NUM_THREADS"] == "3"
+    assert worker_environment(0)["HDRIO_THREADS"] == "1"
+
+
+def test_numba_parallel_kernels_follow_the_budget(monkeypatch):
+    import numba
+
+    from hdrio.jit import size_numba_threads
+
+    monkeypatch.setenv("HDRIO_THREADS", "1")
+    size_numba_threads()
+    assert numba.get_num_threads() == 1
+    monkeypatch.setenv("HDRIO_THREADS", str(max(1, threads())))
+    size_numba_threads()
+    assert numba.get_num_threads() == min(threads(), numba.config.NUMBA_NUM_THREADS)
+
+
+def test_the_command_ends_with_its_output_and_exit_code(tmp_path, brackets):
+    # python -m hdrio ends through os._exit after flushing: output redirected to a file
+    # (block-buffered) is whole, and the exit code is the command's.
+    out = tmp_path / "stdout.txt"
+    with out.open("w") as stdout:
+        done = subprocess.run([sys.executable, "-m", "hdrio", "merge", *map(str, brackets),
+                               "-o", str(tmp_path / "m.exr")], stdout=stdout,
+                              stderr=subprocess.PIPE, text=True,
+                              env={**os.environ, "HDRIO_THREADS": "2"})
+    assert done.returncode == 0, done.stderr
+    text = out.read_text()
+    assert "wrote:" in text and "check:" in text and text.endswith("\n")
+    refused = subprocess.run([sys.executable, "-m", "hdrio", "merge", str(brackets[0]),
+                              "-o", str(tmp_path / "one.exr")], capture_output=True,
+                             text=True)
+    assert refused.returncode == 2 and "error" in refused.stderr
