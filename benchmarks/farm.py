@@ -1,4 +1,4 @@
-"""A shoot on several workers: throughput of ``--group`` with 2 workers against 1.
+"""A shoot on several workers: throughput of ``--group`` with N workers against 1.
 
 12 bracket sets of 7 JPEGs at 12 MP (the demo scene, tiled; each set's files are hard
 links to one rendered ladder, named by the file-name convention), merged to half EXRs by
@@ -9,8 +9,9 @@ the ``hdrio`` command as a user runs it, one fresh process per row:
   manager hands out; a worker's merge is itself multi-threaded, so one unpinned worker
   already keeps most of two cores busy and a second worker can add only what it leaves
   idle, while workers of one core each show how the engine scales with workers;
-* ``--threads 2``: a local pool of two worker processes;
-* ``--dask local:1`` and ``--dask local:2``: a Dask ``LocalCluster`` of one and two;
+* ``--threads N``: a local pool of N worker processes, for each N of ``--workers``
+  (default ``1,2``; the 16-core device's run is ``--sets 48 --workers 1,4,16``);
+* ``--dask local:N``: a Dask ``LocalCluster`` of as many;
 * ``hdrio merge`` of one set: the single-run memory budget.
 
 Throughput is sets per minute of the whole command (start-up included), with the CPU
@@ -87,64 +88,79 @@ def measure(command: list[str]) -> dict:
             "load_before": load_before, "load_after": os.getloadavg()[0]}
 
 
+def runs(hdrio: list[str], folder: Path, shoot: Path, sets: int, workers: list[int]
+         ) -> list[tuple[str, int, list[str]]]:
+    """The rows: one set alone, one worker pinned to one core, then for each count of
+    ``workers`` the local pool (``--threads N``) and a Dask ``LocalCluster``
+    (``--dask local:N``)."""
+    one_set = sorted(shoot.glob("pos_a_*.jpg"))
+    rows = [("hdrio merge, one set (single-run budget)", 1,
+             [*hdrio, "merge", *map(str, one_set), "-o", str(folder / "one.exr")]),
+            ("--group, 1 worker pinned to one core (taskset -c 0)", sets,
+             ["taskset", "-c", "0", *hdrio, "--threads", "1", str(shoot), "--group",
+              "--merge", "-o", f"{folder}/pinned/{{first_stem}}.exr"])]
+    for count in workers:
+        rows.append((f"--group, local pool of {count} (--threads {count})", sets,
+                     [*hdrio, "--threads", str(count), str(shoot), "--group", "--merge",
+                      "-o", f"{folder}/pool{count}/{{first_stem}}.exr"]))
+        rows.append((f"--group --dask local:{count}", sets,
+                     [*hdrio, str(shoot), "--dask", f"local:{count}", "--group", "--merge",
+                      "-o", f"{folder}/dask{count}/{{first_stem}}.exr"]))
+    return rows
+
+
+def ratios(by_name: dict[str, dict], workers: list[int]) -> dict[str, float]:
+    """Throughput of N workers against one (the pool's and Dask's), and Dask's against
+    the pool's at the same N (sets per minute)."""
+    def rate(name: str) -> float:
+        return by_name[name]["sets_per_minute"]
+
+    one = rate(f"--group, local pool of {workers[0]} (--threads {workers[0]})")
+    result = {}
+    for count in workers[1:]:
+        pool = rate(f"--group, local pool of {count} (--threads {count})")
+        dask = rate(f"--group --dask local:{count}")
+        result[f"pool {count} / {workers[0]} workers"] = pool / one
+        result[f"dask local:{count} / pool {count}"] = dask / pool
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.farm", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sets", type=int, default=12)
     parser.add_argument("--frames", type=int, default=7)
     parser.add_argument("--size", default="3000x4000", help="HEIGHTxWIDTH (12 MP)")
+    parser.add_argument("--workers", default="1,2",
+                        help="worker counts, the first the baseline (the device's 16-core "
+                             "run: 1,4,16)")
     parser.add_argument("--json", type=Path, default=DEFAULT_OUT / "farm.json")
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.size.split("x"))
+    workers = [int(v) for v in args.workers.split(",")]
     hdrio = [sys.executable, "-m", "hdrio"]
     rows = []
     with tempfile.TemporaryDirectory(prefix="hdrio-farm-") as folder:
         folder = Path(folder)
         shoot = make_shoot(folder, args.sets, args.frames, height, width)
-        one_set = sorted(shoot.glob("pos_a_*.jpg"))
-        runs = [("hdrio merge, one set (single-run budget)", 1,
-                 [*hdrio, "merge", *map(str, one_set), "-o", str(folder / "one.exr")]),
-                ("--group, 1 worker (--threads 1)", args.sets,
-                 [*hdrio, "--threads", "1", str(shoot), "--group", "--merge",
-                  "-o", f"{folder}/pool1/{{first_stem}}.exr"]),
-                ("--group, 1 worker pinned to one core (taskset -c 0)", args.sets,
-                 ["taskset", "-c", "0", *hdrio, "--threads", "1", str(shoot), "--group",
-                  "--merge", "-o", f"{folder}/pinned/{{first_stem}}.exr"]),
-                ("--group, local pool of 2 (--threads 2)", args.sets,
-                 [*hdrio, "--threads", "2", str(shoot), "--group", "--merge",
-                  "-o", f"{folder}/pool2/{{first_stem}}.exr"]),
-                ("--group --dask local:1", args.sets,
-                 [*hdrio, str(shoot), "--dask", "local:1", "--group", "--merge",
-                  "-o", f"{folder}/dask1/{{first_stem}}.exr"]),
-                ("--group --dask local:2", args.sets,
-                 [*hdrio, str(shoot), "--dask", "local:2", "--group", "--merge",
-                  "-o", f"{folder}/dask2/{{first_stem}}.exr"])]
-        for name, sets, command in runs:
+        for name, sets, command in runs(hdrio, folder, shoot, args.sets, workers):
             row = {"run": name, "sets": sets, **measure(command)}
             row["sets_per_minute"] = 60 * sets / row["seconds"]
+            row["cpu_seconds_per_set"] = row["cpu_seconds"] / sets
             rows.append(row)
-            print(f"{name:42s} {row['seconds']:7.1f} s  {row['sets_per_minute']:5.2f} sets/min"
+            print(f"{name:48s} {row['seconds']:7.1f} s  {row['sets_per_minute']:6.2f} sets/min"
                   f"  CPU {row['cpu_seconds']:6.1f} s ({row['cpu_seconds'] / row['seconds']:.2f}"
-                  " cores)"
+                  f" cores, {row['cpu_seconds_per_set']:.2f} s a set)"
                   f"  process peak {row['process_peak_mb']:6.0f} MB  worker peak "
                   f"{row['worker_peak_mb'] or float('nan'):6.0f} MB  load "
                   f"{row['load_before']:.1f} -> {row['load_after']:.1f}", flush=True)
     by_name = {row["run"]: row for row in rows}
-    ratios = {
-        "pool 2 / 1 workers": by_name["--group, 1 worker (--threads 1)"]["seconds"]
-        / by_name["--group, local pool of 2 (--threads 2)"]["seconds"],
-        "dask 2 / 1 workers": by_name["--group --dask local:1"]["seconds"]
-        / by_name["--group --dask local:2"]["seconds"],
-        "pool 2 workers / 1 worker on one core": by_name[
-            "--group, 1 worker pinned to one core (taskset -c 0)"]["seconds"]
-        / by_name["--group, local pool of 2 (--threads 2)"]["seconds"],
-        "dask 2 workers / 1 worker on one core": by_name[
-            "--group, 1 worker pinned to one core (taskset -c 0)"]["seconds"]
-        / by_name["--group --dask local:2"]["seconds"]}
-    for name, ratio in ratios.items():
-        print(f"throughput {name}: {ratio:.2f}x (target >= 1.6x)")
+    found = ratios(by_name, workers)
+    for name, ratio in found.items():
+        print(f"throughput {name}: {ratio:.2f}x")
     document = {"cpus": os.cpu_count(), "sets": args.sets, "frames": args.frames,
-                "size": args.size, "rows": rows, "throughput_ratios": ratios,
+                "size": args.size, "workers": workers, "rows": rows,
+                "throughput_ratios": found,
                 "when": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(document, indent=2) + "\n")

@@ -74,14 +74,17 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
 
 
 def table(rows: list[dict]) -> list[str]:
-    lines = ["| section | method | time (s) | peak MB | error |", "|---|---|---:|---:|---|"]
+    lines = ["| section | method | time (s) | CPU (s) | peak MB | error |",
+             "|---|---|---:|---:|---:|---|"]
     for row in rows:
         error = ", ".join(f"{key} {row[key]:.4g}" for key in
                           ("median_error", "p99_error", "response_rms_stops") if key in row)
         seconds = f"{row['seconds']:.3f}" if "seconds" in row else row.get("skipped", "")
         peak = row.get("process_peak_mb", row.get("peak_mb"))
         peak = f"{peak:.0f}" if peak is not None else ""
-        lines.append(f"| {row['row']} | {row['method']} | {seconds} | {peak} | {error} |")
+        cpu = f"{row['cpu_seconds']:.2f}" if "cpu_seconds" in row else ""
+        lines.append(f"| {row['row']} | {row['method']} | {seconds} | {cpu} | {peak} | "
+                     f"{error} |")
     return lines
 
 

@@ -135,9 +135,11 @@ def demo_rows(hdrio: list[str], folder: Path) -> list[dict]:
     shutil.rmtree(folder / "demo")
     warm = timed([*hdrio, "demo", "-o", str(folder / "demo"), "-q"], env)
     return [{"row": "process", "method": "hdrio demo, empty kernel cache (first run)",
-             "seconds": cold["seconds"], "process_peak_mb": cold["peak_mb"], "demo": "cold"},
+             "seconds": cold["seconds"], "cpu_seconds": cold["cpu_seconds"],
+             "process_peak_mb": cold["peak_mb"], "demo": "cold"},
             {"row": "process", "method": "hdrio demo, cache filled (every later run)",
-             "seconds": warm["seconds"], "process_peak_mb": warm["peak_mb"], "demo": "warm"}]
+             "seconds": warm["seconds"], "cpu_seconds": warm["cpu_seconds"],
+             "process_peak_mb": warm["peak_mb"], "demo": "warm"}]
 
 
 def ratios(rows: list[dict]) -> dict[str, float | None]:

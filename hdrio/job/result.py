@@ -74,6 +74,14 @@ class MergeResult:
     highlights: HighlightReport | None = None
     """What ``--highlights reconstruct`` changed (``None``: not asked, or nothing clipped)."""
 
+    def add_timings(self, clock: PhaseClock) -> None:
+        """Add the phases ``clock`` timed outside the stages (reading, writing, the
+        preview) to :attr:`timings` and :attr:`cpu_timings`."""
+        for phase, seconds in clock.wall.items():
+            self.timings[phase] = self.timings.get(phase, 0.0) + seconds
+        for phase, seconds in clock.cpu.items():
+            self.cpu_timings[phase] = self.cpu_timings.get(phase, 0.0) + seconds
+
     @property
     def dynamic_range_stops(self) -> tuple[float, float]:
         """``(full, robust)``: log2 of max/min luminance, and of its 99.9/0.1 percentiles."""

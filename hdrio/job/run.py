@@ -10,7 +10,6 @@ the preview is :mod:`hdrio.tonemap.preview`'s.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -136,18 +135,18 @@ def _read_and_merge(paths: Sequence[str | Path], plan: MergePlan, *,
     response = None
     if options.response_from is not None and "response" in skips:
         response = read_response(options.response_from)
-    start = time.perf_counter()
+    clock = PhaseClock()
     say(f"reading {len(paths)} bracket{'' if len(paths) == 1 else 's'}")
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
                           progress=read_progress, white_balance=options.raw_multipliers,
                           skip_brackets="brackets" in skips,
                           stop_when_covered=response is not None and "covered" in skips,
                           infer_exposures=options.exposures_from_data)
-    read_time = time.perf_counter() - start
+    clock.lap("read")
     result = run_plan(stack, plan, progress, response, owned=True)
     if response is not None:
         result.skipped.response_from = str(options.response_from)
-    result.timings["read"] = read_time
+    result.add_timings(clock)
     return result
 
 
@@ -210,15 +209,14 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                           motion=plan.aligns or plan.deghosts)
     result = _read_and_merge(paths, plan, exposures=exposures, exposures_from=exposures_from,
                              progress=progress, read_progress=read_progress)
-    start = time.perf_counter()
+    clock = PhaseClock()
     say(f"writing {output}")
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
                                            alpha=merge_alpha(result), observe=observe,
                                            layers=merge_layers(result))
-    result.timings["write"] = time.perf_counter() - start
+    clock.lap("write")
     if preview is not None:
-        start = time.perf_counter()
         if display_view is not None and result.colour is not None:
             say(f"rendering preview ({' / '.join(display_view)})")
             pixels = preview_OCIO_display(
@@ -231,5 +229,6 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
             pixels = render_preview(result.radiance, tonemap, result.options.colourspace,
                                     result.unseen, **(tonemap_parameters or {}))
         write_preview(preview, pixels)
-        result.timings["preview"] = time.perf_counter() - start
+        clock.lap("preview")
+    result.add_timings(clock)
     return result
