@@ -8,7 +8,8 @@ import OpenImageIO as oiio
 import pytest
 
 from hdrio.cli import main
-from hdrio.cms.checks import COLORCHECKER, REC709_D65, check_exr, check_pixels
+from hdrio.cms.chart import COLORCHECKER
+from hdrio.cms.checks import REC709_D65, check_exr, check_pixels
 from hdrio.cms.spaces import chromaticities
 from hdrio.errors import HdrioError
 from hdrio.io.write import write_exr

@@ -55,3 +55,39 @@ def read_typed_attributes(path: str | Path) -> dict[str, object]:
                 for attribute in image.spec().extra_attribs}
     finally:
         image.close()
+
+
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+"""The first four bytes of every OpenEXR file."""
+
+
+def require_exr(path: str | Path) -> None:
+    """Raise :class:`InputError` unless ``path`` is a readable file that starts as an
+    OpenEXR file does, naming what it is instead (a JPEG, say) when OpenImageIO knows."""
+    check_input(path, "an OpenEXR file")
+    with open(path, "rb") as file:
+        start = file.read(len(EXR_MAGIC))
+    if start == EXR_MAGIC:
+        return
+    kind = _image_format(path)
+    what = (f"a {kind.upper()} image, not OpenEXR" if kind
+            else "not an OpenEXR file (it does not start as one)")
+    raise InputError(path, f"{what}: hdrio check reads OpenEXR files (what hdrio merge "
+                           "writes)")
+
+
+def _image_format(path: str | Path) -> str | None:
+    """OpenImageIO's name for the format of ``path`` (``jpeg``), or ``None``."""
+    import OpenImageIO as oiio
+
+    from hdrio.io.native import quiet_native_stderr
+
+    with quiet_native_stderr():
+        image = oiio.ImageInput.open(str(path))
+        if image is None:
+            oiio.geterror()  # clear it
+            return None
+        try:
+            return image.format_name()
+        finally:
+            image.close()
