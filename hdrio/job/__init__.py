@@ -6,16 +6,5 @@ What it is asked (:mod:`~hdrio.job.options`), every setting resolved once
 (:mod:`~hdrio.job.result`) and what the EXR holds (:mod:`~hdrio.job.output`). Every front
 end (the command line, the chain, the Blender add-on, a farm's worker) calls
 :func:`~hdrio.job.run.merge_files`, :func:`~hdrio.job.run.merge_paths` or
-:func:`~hdrio.job.run.merge_stack`.
+:func:`~hdrio.job.run.merge_stack` (also :mod:`hdrio`'s own names, imported on first use).
 """
-
-from hdrio.lazy import lazy_attributes
-
-_EXPORTS = {
-    "MergeOptions": "hdrio.job.options", "MergePlan": "hdrio.job.plan",
-    "plan_merge": "hdrio.job.plan", "MergeResult": "hdrio.job.result",
-    "merge_files": "hdrio.job.run", "merge_paths": "hdrio.job.run",
-    "merge_stack": "hdrio.job.run",
-}
-__all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS)
