@@ -45,7 +45,7 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
-from hdrio.merge.noise import code_variance_floor, fit_noise
+from hdrio.merge.noise import fit_noise, noise_encoding
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge_job import MergeOptions, MergeResult, PhaseClock, Progress
 from hdrio.merge_output import (
@@ -192,9 +192,9 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     clock.lap("align")
     if options.deghost != "off":
         say("deghosting")
-    code_floor = code_variance_floor(stack.files)
+    encoding = noise_encoding(stack.files, stack.code_max, is_raw_stack(stack))
     if options.deghost != "off" and stack.count > 1:
-        before = fit_noise(stack.codes, stack.exposures, response, code_floor=code_floor)
+        before = fit_noise(stack.codes, stack.exposures, response, encoding=encoding)
     else:
         before = None
     solved = response
@@ -217,7 +217,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     noise = None
     if method in NOISE_AWARE or options.uncertainty:  # on the final (re-solved) response
         noise = before if before is not None and response is solved else fit_noise(
-            stack.codes, stack.exposures, response, code_floor=code_floor)
+            stack.codes, stack.exposures, response, encoding=encoding)
     jit.announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](

@@ -19,7 +19,7 @@ import numpy as np
 from benchmarks.truth.report import NOISE_ORACLE
 from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE, Stack
 from hdrio.merge.estimators import MERGE_METHODS
-from hdrio.merge.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
+from hdrio.merge.noise import QUANTISATION, NoiseModel, fit_noise, noise_encoding
 from hdrio.merge_job import MergeOptions
 from hdrio.pipeline import merge_stack
 from hdrio.response.curve import CameraResponse
@@ -114,7 +114,7 @@ def _oracle(stack: Stack) -> MethodOutput:
     radiance, _ = MERGE_METHODS[MergeOptions().merge](
         exposures, response, MergeOptions().weighting,
         noise=fit_noise(exposures.codes, exposures.exposures, response,
-                        code_floor=code_variance_floor(exposures.files)))
+                        encoding=noise_encoding(exposures.files, exposures.code_max)))
     return MethodOutput(radiance, response.log_inverse)
 
 

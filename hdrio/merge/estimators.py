@@ -43,9 +43,10 @@ from hdrio.merge.debevec1997 import (
 )
 from hdrio.merge.noise import (
     NoiseModel,
-    code_variance_floor,
     fit_noise,
+    noise_encoding,
     observation_variance,
+    supported_range,
     usable_codes,
 )
 from hdrio.merge.saturation import policy_limits
@@ -55,19 +56,6 @@ from hdrio.stack import ExposureStack, exposure_columns
 
 NOISE_AWARE = ("inverse-variance", "Poisson")
 """Estimators whose weights read the noise model."""
-
-
-def supported_range(response: CameraResponse) -> np.ndarray:
-    """``(levels, C)``: codes from the first to the last the solve supported, per channel.
-
-    Codes inside that range that no sample fell on (most of them at 16 bits, where the
-    solve sees 1024 levels) have ``g`` interpolated between supported neighbours: as good
-    as their neighbours, so they keep their weight.
-    """
-    supported = np.asarray(response.supported, dtype=bool)
-    after_first = np.logical_or.accumulate(supported, axis=0)
-    before_last = np.logical_or.accumulate(supported[::-1], axis=0)[::-1]
-    return after_first & before_last
 
 
 def weights_inverse_variance(response: CameraResponse, exposures, noise: NoiseModel
@@ -120,7 +108,7 @@ def _merge(method: str):
               noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
         if method in NOISE_AWARE and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,
-                              code_floor=code_variance_floor(stack.files))
+                              encoding=noise_encoding(stack.files, stack.code_max))
         weights = merge_weights(method, response, stack.channel_exposures, noise)
         limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,
                                            stack.exposures)
