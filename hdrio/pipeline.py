@@ -198,7 +198,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     else:
         before = None
     solved = response
-    response = deghost_step(stack, response, motion, options.deghost, resolve, before)
+    response = deghost_step(stack, response, motion, options.deghost, resolve, before,
+                            excluded)
     clock.lap("deghost")
     merged = stack
     kinds = stack.kinds
