@@ -261,8 +261,9 @@ def movers_kept(case: HardCase, radiance: np.ndarray, scale: float = 1.0) -> lis
     """What the merge shows at each bracket's footprint of the object (the footprint's
     inner part, clear of the other footprints), by the median ``ln`` ratio of ``scale *
     radiance`` to the object's and the background's radiance there: ``object`` (that
-    bracket's view kept), ``background``, ``bound`` (neither, where every other bracket
-    clips: only a bound on the background is left) or ``blend`` (two views mixed)."""
+    bracket's view kept), ``background``, ``bound`` (neither, where the other brackets
+    clip at most of it: only their bound on the background is left) or ``blend`` (two
+    views mixed)."""
     shown = []
     for j, footprint in enumerate(case.objects):
         if footprint is None:
@@ -285,7 +286,7 @@ def movers_kept(case: HardCase, radiance: np.ndarray, scale: float = 1.0) -> lis
         if min(to_object, to_background) <= 0.25 * gap:
             shown.append("object" if to_object < to_background else "background")
         else:
-            shown.append("bound" if clipped > 0.9 else "blend")
+            shown.append("bound" if clipped > 0.5 else "blend")
     return shown
 
 

@@ -11,3 +11,8 @@ ALIGN_MODES = ("auto", "off", "translation", "euclidean", "homography")
 
 DEGHOST_MODES = ("auto", "off")
 """``--deghost``."""
+
+REFERENCE_RULE = "the longest well-exposed bracket at the most pixels"
+"""Which bracket the others are registered to
+(:func:`hdrio.align.registration.reference_bracket`), in the words README, ``--align``'s
+help and the summary all use."""

@@ -38,14 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage
 
-from hdrio.align.consistency import (
-    TEST_BANDS,
-    Tables,
-    cell_disagreement,
-    comparametric_correction,
-    consistency_variance,
-    test_tables,
-)
+from hdrio.align.comparametric import comparametric_correction, consistency_variance
+from hdrio.align.consistency import TEST_BANDS, Tables, cell_disagreement, test_tables
 
 __all__ = ["CELL", "TEST_BANDS", "Deghosting", "comparametric_correction",
            "consistency_variance", "deghost"]

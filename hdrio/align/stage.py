@@ -25,10 +25,10 @@ from hdrio.align.registration import (
     linear_tables,
     reference_bracket,
     register,
-    sharp_edges,
 )
 from hdrio.align.resampling import remerge_resampled
-from hdrio.align.warp import coverage
+from hdrio.align.resolve import sharp_edges
+from hdrio.align.warp import coverage, seen_elsewhere
 from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.masked import remerge_masked
@@ -65,6 +65,13 @@ class Motion:
     keep: np.ndarray | None = None
     """``(P, rows, cols)`` keep weights on cells of :data:`hdrio.align.deghost.CELL`
     pixels, or ``None`` when no bracket is dropped anywhere."""
+    unregistered: np.ndarray | None = None
+    """``(rows, cols)`` cells that only a bracket which could not be registered sees
+    (merged unwarped there: the motion layer flags them), or ``None``."""
+
+    def unregistered_fraction(self) -> float:
+        """The fraction of the image only an unregistered bracket sees."""
+        return 0.0 if self.unregistered is None else float(np.mean(self.unregistered))
 
 
 def check_modes(align: str, deghost_mode: str) -> None:
@@ -137,6 +144,15 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
                           for j in range(count)])
         cells[motion.alignment.reference] = 1.0
         motion.uncovered = float(np.mean(cells.min(axis=0) < 1))
+        refused = [j for j, _ in motion.alignment.refused]
+        if refused:  # never merged unwarped where a registered bracket sees the scene
+            seen = seen_elsewhere(stack.codes, stack.code_max,
+                                  [j for j in range(count) if j not in refused], CELL)
+            for j in refused:
+                cells[j] *= ~seen
+            motion.unregistered = ~seen & np.any(
+                [seen_elsewhere(stack.codes, stack.code_max, [j], CELL) for j in refused],
+                axis=0)
     if deghost_mode == "off":
         motion.keep = cells
         return response

@@ -431,7 +431,8 @@ def _fit_channel(pairs, response, c, floors):
         for k in range(phi.size):
             shifted = phi.copy()
             shifted[k] += 0.1
-            J[:, k] = (log_spreads(shifted, groups, limits) - r)[bins] / 0.1
+            with np.errstate(invalid="ignore"):  # a bin emptied by the step: no slope
+                J[:, k] = (log_spreads(shifted, groups, limits) - r)[bins] / 0.1
         J[~np.isfinite(J)] = 0.0
         w = weight / (1.0 + (r[bins] / _TUNING) ** 2)
         H = (J * w[:, None]).T @ J
