@@ -254,6 +254,8 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     if excluded is not None:
         held = _excluded_cells(excluded, cell, rows, cols)
         judged &= ~held & ~held[reference]
+    if coverage is not None:  # a warp's invented border is dropped anyway, not motion
+        judged &= (coverage >= 1.0) & (coverage[reference] >= 1.0)
     flagged = (mean > limits[:, None, None]) & (far > FAR) & judged
     flagged[reference] = False
     # A cell alone says little: JPEG's blocks and a scan's grain flag one cell here and
