@@ -194,7 +194,8 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         say("deghosting")
     encoding = noise_encoding(stack.files, stack.code_max, is_raw_stack(stack))
     if options.deghost != "off" and stack.count > 1:
-        before = fit_noise(stack.codes, stack.exposures, response, encoding=encoding)
+        before = fit_noise(stack.codes, stack.exposures, response, encoding=encoding,
+                           exclude=excluded)
     else:
         before = None
     solved = response
@@ -218,7 +219,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     noise = None
     if method in NOISE_AWARE or options.uncertainty:  # on the final (re-solved) response
         noise = before if before is not None and response is solved else fit_noise(
-            stack.codes, stack.exposures, response, encoding=encoding)
+            stack.codes, stack.exposures, response, encoding=encoding, exclude=excluded)
     jit.announce(say, "merge")
     say(f"merging {merged.count} brackets ({method}, {merge_domain(method)} domain)")
     radiance, statistics = MERGE_METHODS[method](

@@ -153,7 +153,7 @@ def _excluded_cells(excluded: np.ndarray, cell: int, rows: int, cols: int) -> np
 
 
 def _source(codes, tables: Tables, reference: int, region: np.ndarray, flagged: np.ndarray,
-            judged: np.ndarray, limits: np.ndarray, cell: int, resampled: bool
+            judged: np.ndarray, limits: np.ndarray, *, cell: int, resampled: bool
             ) -> tuple[int, np.ndarray]:
     """The bracket whose view ``region`` keeps, and ``(P, rows, cols)`` the cells where
     each bracket disagrees with it (``flagged``: with the reference; ``judged``: cells
@@ -194,7 +194,7 @@ def _source(codes, tables: Tables, reference: int, region: np.ndarray, flagged: 
 
 def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, reference: int,
             coverage: np.ndarray | None = None, cell: int = CELL,
-            threshold: float = THRESHOLD, resampled: bool = True,
+            threshold: float = THRESHOLD, resampled: bool = True, *,
             excluded: np.ndarray | None = None) -> Deghosting:
     """Keep weights for every bracket of ``codes`` (module docstring).
 
@@ -273,7 +273,7 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     for label in range(1, regions + 1):
         region = labels == label
         source, against = _source(codes, tables, reference, region, flagged, judged, limits,
-                                  cell, resampled)
+                                  cell=cell, resampled=resampled)
         drop |= against & region
         drop[source][region] = False
         sources[region] = source

@@ -177,7 +177,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
             # tested again with both as the still scene gives them. Nothing moving then:
             # the first response stands (a still stack's merge is --deghost off's).
             noise = fit_noise(stack.codes, stack.exposures, solved, encoding=(
-                "8-bit JPEG" if noise is not None and noise.common is not None else None))
+                "8-bit JPEG" if noise is not None and noise.common is not None else None),
+                exclude=excluded)
             second = deghost(
                 stack.codes, linear_tables(solved, stack.exposures),
                 consistency_variance(solved, stack.exposures, noise), reference, cells,

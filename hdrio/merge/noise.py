@@ -454,7 +454,8 @@ def _fit_channel(pairs, response, c, floors):
 
 def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
               grid: np.ndarray | None = None, code_floor: float = QUANTISATION, *,
-              encoding: str | None = None) -> NoiseModel:
+              encoding: str | None = None, exclude: np.ndarray | None = None
+              ) -> NoiseModel:
     """Fit the :class:`NoiseModel` from bracket-to-bracket disagreement (module docstring).
 
     ``codes`` ``(P, H, W, C)`` sorted by exposure; ``exposures`` ``(P,)`` or ``(P, C)``;
@@ -462,8 +463,10 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
     the code term's least value (the rounding of integer codes); ``encoding`` one of
     :data:`ENCODINGS` (:func:`noise_encoding`; by default 8-bit, or 16-bit codes), whose
     quantisation floors the other terms and sets JPEG's common term
-    (:func:`encoding_floors`). Falls back to the floors, per channel, when too few bins of
-    pairs can be measured (two brackets of a flat scene, say).
+    (:func:`encoding_floors`); ``exclude``: ``(P, H, W)`` or ``(H, W)`` observations kept
+    out of the merge (``--mask``, ``--exclude-color``), kept out of the fit too (a masked
+    block of garbage made a fit's shot noise 20x). Falls back to the floors, per channel,
+    when too few bins of pairs can be measured (two brackets of a flat scene, say).
     """
     count, height, width, channels = codes.shape
     encoding = encoding or ("8-bit" if response.code_max <= 255 else "16-bit")
@@ -473,6 +476,9 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
     near, shape = None, (-(-height // stride), -(-width // stride))
     if grid.shape[1] == shape[0] * shape[1]:  # the default grid
         near = near_clipping(codes, stride, int(np.ceil(CLIP_TOP * response.code_max)))
+        if exclude is not None:
+            held = np.broadcast_to(exclude, (count, height, width))[:, ::stride, ::stride]
+            near |= held.reshape(count, -1)
     times = np.broadcast_to(exposure_columns(np.asarray(exposures, np.float64)),
                             (count, channels))
     X = np.exp(np.asarray(response.log_inverse, np.float64))
