@@ -37,8 +37,8 @@ def size_numba_threads() -> None:
 
 
 STAGES: dict[str, tuple[str, ...]] = {
-    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs",),
-    "motion": ("hdrio.align.quick:_read", "hdrio.align.deghost:_consistency"),
+    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise:_clipped_near"),
+    "motion": ("hdrio.align.quick:_read", "hdrio.align.consistency:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }
 """The kernels whose cache stands for each stage's (they compile together). Motion's are

@@ -3,9 +3,9 @@
 Dark clothes in the reference bracket fall below its usable codes; the other brackets
 show the brighter floor behind where the person stood when they were taken. Such a
 reference still says the radiance is at most its first usable code's estimate, so those
-brackets are inconsistent (tested, dropped), not stand-ins for it: taken over untested,
+brackets are inconsistent with it (tested), not stand-ins for it: taken over untested,
 the floor merged channel by channel with the reference's dark codes, in coloured speckle
-(HDR Toolbox's ghost/ stack).
+(HDR Toolbox's ghost/ stack). The region then keeps one view (hdrio.align.deghost).
 """
 
 from __future__ import annotations
@@ -36,7 +36,12 @@ def _stacks():
     return still, moved, with_person
 
 
-def test_a_black_reference_drops_the_brighter_brackets_behind_it():
+def test_a_person_only_the_black_reference_shows_is_one_consistent_view():
+    """The reference shows dark clothes (near black) where the other two brackets show
+    the floor: the region keeps one view, the one most brackets agree with (the floor,
+    seen well by both), never one channel from each (the speckle this stack once gave:
+    one channel from the floor, the others dark). Before the consistent labelling of
+    issue 28 the reference's dark view was kept; either is one snapshot."""
     still, moved, truth = _stacks()
     response = gamma_inverse_response()[0]
     options = MergeOptions(align="off", deghost="auto")
@@ -45,25 +50,16 @@ def test_a_black_reference_drops_the_brighter_brackets_behind_it():
     keep = result.motion.keep
     inner = (slice(PERSON[0].start // 8 + 1, PERSON[0].stop // 8 - 1),
              slice(PERSON[1].start // 8 + 1, PERSON[1].stop // 8 - 1))
-    # Both other brackets dropped inside the person (cells of 8 px, away from the edge).
-    assert keep[0][inner].max() == 0.0 and keep[2][inner].max() == 0.0
+    assert keep[1][inner].max() == 0.0  # the reference's view of the person dropped
+    assert keep[0][inner].min() == 1.0 and keep[2][inner].min() == 1.0
     inside = (slice(PERSON[0].start + 8, PERSON[0].stop - 8),
               slice(PERSON[1].start + 8, PERSON[1].stop - 8))
-    person = result.radiance[inside]
     plain = merge_stack(ExposureStack.from_arrays(still, TIMES), options, response=response)
-    # The person comes from the dark reference alone (a few codes, noisy, some at 0),
-    # never the floor behind in any channel (before: one channel from the floor, the
-    # others dark: speckle). The floor there is at least 10x brighter than any channel.
-    assert person.max() < 0.1 * plain.radiance[inside].min(), (
-        person.max(), plain.radiance[inside].min())
-    # Its mean colour is the person's (0.0065, 0.007, 0.006): within the noise of ~1000
-    # pixels at ~6 codes, 30 %.
-    colour = person.reshape(-1, 3).mean(axis=0)
-    assert np.allclose(colour / colour[1], (0.93, 1.0, 0.86), rtol=0.3), colour
-    # And the floor away from the person is merged as before.
+    # Every channel is the floor's, as the still stack merges it (noise: measured 1.4 %).
+    ratio = result.radiance[inside] / plain.radiance[inside]
+    assert np.abs(ratio - 1).max() < 0.05, np.abs(ratio - 1).max()
+    # And the floor away from the person is merged as before (measured 1.1 %).
     away = (slice(0, 24), slice(None))
-    # (The noise model is fitted from each stack: the weights differ a little. Measured
-    # 1.1 %.)
     assert np.abs(result.radiance[away] / plain.radiance[away] - 1).max() < 0.03
 
 

@@ -95,7 +95,8 @@ def test_a_masked_bracket_is_filled_from_the_others(brackets, tmp_path, capsys):
         if j == 1:
             values[10:18, 20:28] = 0
         _write_grey(mask, values)
-    unmasked = merge_paths(stack).radiance
+    # (Without deghosting: since issue 28 deghosting drops such a block by itself.)
+    unmasked = merge_paths(stack, options=MergeOptions(deghost="off")).radiance
     result = merge_paths(stack, options=MergeOptions(masks=(str(tmp_path / "masks" /
                                                                 "{stem}.png"),)))
     region = (slice(10, 18), slice(20, 28))

@@ -21,11 +21,12 @@ from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.estimators import ESTIMATORS
 from hdrio.radiometry.noise import (
-    JPEG_CODE_VARIANCE,
+    JPEG_COMMON_VARIANCE,
     QUANTISATION,
     NoiseModel,
-    code_variance_floor,
+    encoding_floors,
     fit_noise,
+    noise_encoding,
     observation_variance,
     usable_codes,
 )
@@ -64,34 +65,64 @@ def demo():
 
 
 def test_fit_recovers_the_renderers_noise(demo):
-    # With the true curve the fit sees the renderer's own noise. Shot noise dominates
-    # every code above ~40: measured 7.5 % high (1.47e-4 against 1.37e-4). Read noise is
-    # seen only through codes near black, where the clipped-off noise makes it look
-    # smaller (measured 0.45x): what matters for the weights is the total standard
-    # deviation, bound within 10 % of the truth at codes 32-250, and the shot term
-    # within 15 %.
+    # With the true curve the fit sees the renderer's own noise. What it measures is
+    # neighbouring brackets' disagreement, which pins a bracket's noise at codes where
+    # its longer neighbour is not clipped: the low and middle codes well, the top
+    # weakly (a code above 200 meets an unclipped longer neighbour only in the darkest
+    # parts of the scene). For a gamma curve the shot and code terms have nearly the same
+    # shape (X against X^1.09), so the split between them is loose too. Measured: the
+    # disagreement 0.89-1.06x the prediction in every decile of brightness
+    # (benchmarks/noise_model.py; the issue's bound for real stacks, 0.8-1.25); the total
+    # standard deviation 0.95-1.06x the truth at codes 32-100 (bound 10 %) and up to
+    # 1.17x at 250 (bound 25 %); read noise 0.45-1.3x (bound 3x: near black the
+    # clipped-off noise hides some of it), and never 0.
+    from benchmarks.noise_model import BOUNDS, disagreement_deciles
+
     _, stack, _ = demo
     response, unit = gamma_truth()
     fitted = fit_noise(stack.codes, stack.exposures, response)
     truth = true_noise(unit)
     assert fitted.source == "fitted" and fitted.pairs > 10_000
-    assert np.allclose(fitted.shot, truth.shot, rtol=0.15), (fitted.shot, truth.shot)
-    sigma = np.sqrt(fitted.exposure_variance(response))[32:251]
-    sigma_true = np.sqrt(truth.exposure_variance(response))[32:251]
-    assert np.max(np.abs(sigma / sigma_true - 1)) < 0.10
+    sigma = np.sqrt(fitted.exposure_variance(response))
+    sigma_true = np.sqrt(truth.exposure_variance(response))
+    assert np.max(np.abs(sigma / sigma_true - 1)[32:101]) < 0.10
+    assert np.max(np.abs(sigma / sigma_true - 1)[32:251]) < 0.25
+    assert np.all(fitted.read < 3 * truth.read) and np.all(fitted.read > truth.read / 3)
+    ratios, _ = disagreement_deciles(stack.codes, stack.exposures, response, fitted)
+    assert np.all((ratios >= BOUNDS[0]) & (ratios <= BOUNDS[1])), ratios
 
 
-def test_fit_falls_back_to_quantisation_on_a_flat_scene():
+def test_fit_falls_back_to_the_encodings_floors_on_a_flat_scene():
+    # Nothing to measure: every term at its floor, none zero (a zero read noise handed
+    # near-black codes of short brackets the weight on real night stacks: issue 28).
     codes = np.full((3, 20, 30, 3), 120, np.uint8)
     response, _ = gamma_truth()
     fitted = fit_noise(codes, [1, 2, 4], response)
+    floors = encoding_floors(response, "8-bit")
     assert fitted.source == "quantisation"
-    assert np.all(fitted.code == QUANTISATION) and np.all(fitted.shot == 0)
+    assert np.all(fitted.code == QUANTISATION)
+    for term in ("shot", "read"):
+        assert np.all(getattr(fitted, term) == floors[term]) and np.all(floors[term] > 0)
+        assert fitted.origin[term] == ("floor",) * 3
 
 
-def test_jpeg_brackets_floor_the_code_noise():
-    assert code_variance_floor(["a.JPG", "b.png"]) == JPEG_CODE_VARIANCE
-    assert code_variance_floor(["a.png", "b.tif"]) == QUANTISATION
+def test_jpeg_brackets_carry_the_encodings_common_error():
+    assert noise_encoding(["a.JPG", "b.png"], 255) == "8-bit JPEG"
+    assert noise_encoding(["a.png", "b.tif"], 255) == "8-bit"
+    assert noise_encoding(["a.png"], 65535) == "16-bit"
+    assert noise_encoding(["a.jpg"], 65535, linear=True) == "linear"
+    response, _ = gamma_truth()
+    assert np.all(encoding_floors(response, "8-bit JPEG")["common"] == JPEG_COMMON_VARIANCE)
+    assert np.all(encoding_floors(response, "8-bit")["common"] == 0)
+    # The common error enters the weights' variance, not two brackets' disagreement.
+    noise = NoiseModel(np.full(3, 1e-4), np.full(3, 1e-6), np.full(3, QUANTISATION),
+                       relative=np.full(3, 1e-3), common=np.full(3, JPEG_COMMON_VARIANCE))
+    weights_view = observation_variance(response, [1.0, 4.0], noise)
+    disagreement = observation_variance(response, [1.0, 4.0], noise, disagreement=True)
+    bare = observation_variance(response, [1.0, 4.0], NoiseModel(noise.shot, noise.read,
+                                                                 noise.code))
+    assert np.all(weights_view >= bare) and np.all(disagreement >= bare)
+    assert not np.allclose(weights_view, disagreement)
 
 
 def test_variance_table_and_usable_codes():

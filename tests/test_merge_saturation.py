@@ -127,14 +127,14 @@ def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
     # where a camera's matrix still biases every pixel, it is 0.22 and 0.13.
     from benchmarks.truth.stacks import exposure_ladder, jpeg_round_trip
     from hdrio.merge import saturation
-    from hdrio.radiometry.noise import code_variance_floor, fit_noise, noise_grid
+    from hdrio.radiometry.noise import fit_noise, noise_encoding, noise_grid
     from hdrio.tools.synthetic import render_brackets
 
     scene = _scene(name)
     times = exposure_ladder(scene, 7, 2.0)
     codes = jpeg_round_trip(render_brackets(scene.radiance, times, seed=3))
     response, _ = gamma_inverse_response()
-    noise = fit_noise(codes, times, response, code_floor=code_variance_floor(["f.jpg"]))
+    noise = fit_noise(codes, times, response, encoding=noise_encoding(["f.jpg"], 255))
     grid = noise_grid(codes, saturation.MIXING_GRID_LIMIT)
     limits = saturation.saturation_limits(codes, response, noise, grid)
     assert saturation.channel_mixing(grid, response, times, limits) > 1.0

@@ -22,7 +22,7 @@ from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_stack
 from hdrio.merge.methods import MERGE_METHODS
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import QUANTISATION, NoiseModel, code_variance_floor, fit_noise
+from hdrio.radiometry.noise import QUANTISATION, NoiseModel, fit_noise, noise_encoding
 from hdrio.stack import ExposureStack
 
 
@@ -114,7 +114,7 @@ def _oracle(stack: Stack) -> MethodOutput:
     radiance, _ = MERGE_METHODS[MergeOptions().merge](
         exposures, response, MergeOptions().weighting,
         noise=fit_noise(exposures.codes, exposures.exposures, response,
-                        code_floor=code_variance_floor(exposures.files)))
+                        encoding=noise_encoding(exposures.files, exposures.code_max)))
     return MethodOutput(radiance, response.log_inverse)
 
 

@@ -19,6 +19,12 @@ from numba import njit
 from hdrio.parallel import on_threads
 from hdrio.skips import well_exposed_codes
 
+REGISTRABLE = (0.02, 0.95)
+"""Codes strictly inside these fractions of the range register a bracket (the base's
+``valid``): darker than the well-exposed range's 5 %, so that the longest brackets of a
+long ladder, clipped but in the shadows, share edges with their neighbours (a hand-held
+7 x 2 EV ladder's two longest were left unregistered at 5 %)."""
+
 BASE_PIXELS = 1_600_000
 """Largest base image: above this the base is block-averaged 2x, 4x, ... (24 MP -> 4x)."""
 
@@ -121,7 +127,7 @@ def base_image(codes: np.ndarray, linear: np.ndarray, code_max: int,
     out = np.empty((height, width), np.float32)
     grey = np.empty((height, width), np.float32)
     valid = np.empty((height, width), np.bool_)
-    low, high = well_exposed_codes(code_max)
+    low, high = well_exposed_codes(code_max, REGISTRABLE)
     on_threads(_base_rows, height, codes, np.ascontiguousarray(linear, np.float32), low, high,
                factor, out, valid, grey)
     return BaseImage(np.log(np.maximum(out, np.float32(1e-30))), valid, grey, factor)

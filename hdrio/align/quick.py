@@ -121,9 +121,12 @@ def _grid_shape(height: int, width: int, rows: int, cols: int) -> tuple[int, int
     return -(-(height - rows // 2) // rows), -(-(width - cols // 2) // cols)
 
 
-def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample (on
-    large images :data:`SPREAD` times fewer rows, as many times more columns)."""
+    large images :data:`SPREAD` times fewer rows, as many times more columns); with
+    ``usable_only``, among the sample's well-exposed pixels only (a dark bracket's
+    strongest gradients are at its clipped highlights)."""
     height, width = codes.shape[:2]
     stride = max(STRIDE, int(np.sqrt(height * width / GRID)))
     rows, cols = stride, stride
@@ -131,10 +134,14 @@ def _points(codes: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarr
         rows, cols = stride * SPREAD, max(1, stride // SPREAD)
     shape = _grid_shape(height, width, rows, cols)
     image = np.empty(shape)
-    _grid(codes, np.ascontiguousarray(linear, np.float64), 0, 0, rows, cols, image,
-          np.empty(shape, np.bool_))
+    good = np.empty(shape, np.bool_)
+    low, high = well_exposed_codes(int(linear.shape[-1]) - 1) if usable_only else (0, 0)
+    _grid(codes, np.ascontiguousarray(linear, np.float64), low, high, rows, cols, image, good)
     gy, gx = np.gradient(image, rows, cols)  # per pixel: the grid's steps differ
-    strength = (gx * gx + gy * gy).reshape(-1)
+    strength = gx * gx + gy * gy
+    if usable_only:
+        strength[~good] = -1.0
+    strength = strength.reshape(-1)
     count = min(POINTS, strength.size)
     index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
     i, k = np.divmod(index, image.shape[1])
@@ -177,12 +184,64 @@ def corner_motion_error(delta: np.ndarray, covariance: np.ndarray, half: float
     return motion, float(np.sqrt(max(0.0, gradient @ covariance @ gradient)))
 
 
+def _read_all(codes: np.ndarray, linear: np.ndarray, brackets, ys, xs, low: int, high: int
+              ) -> dict[int, tuple]:
+    """:func:`_read` of each of ``brackets`` at the points ``(ys, xs)``: ``{bracket:
+    (values, gx, gy, good)}``."""
+    n = ys.size
+    reads = {}
+    for j in brackets:
+        values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+        _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
+              good)
+        release(codes, j)
+        reads[j] = (values, gx, gy, good)
+    return reads
+
+
+def _pair_still(template, moving, ys, xs, height: int, width: int) -> bool | None:
+    """Whether one Gauss-Newton step of translation + rotation (and an offset) from the
+    identity finds ``moving`` within :data:`STILL` of ``template`` (both :func:`_read`
+    tuples at ``(ys, xs)``), or within :data:`~hdrio.align.registration.WITHIN` and
+    :data:`SIGMAS` standard errors of it; ``None`` when too few points are good in
+    both (under 200) or the step is singular."""
+    values_k, gx, gy, ok_k = template
+    values, _, _, ok_j = moving
+    good = ok_k & ok_j
+    if np.count_nonzero(good) < 200:
+        return None
+    half = max(height, width) / 2.0
+    u = (xs - (width - 1) / 2.0) / half
+    v = (ys - (height - 1) / 2.0) / half
+    sd = np.stack([gx * half, gy * half, -v * gx * half + u * gy * half,
+                   np.ones(ys.size)], axis=1)[good]
+    error = (values - values_k)[good]
+    error = error - np.median(error)
+    scale = 1.4826 * np.median(np.abs(error)) + 1e-6
+    weight = np.minimum(1.0, 1.345 * scale / (np.abs(error) + 1e-12))
+    weighted = sd * weight[:, None]
+    normal = weighted.T @ sd
+    try:
+        delta = np.linalg.solve(normal, weighted.T @ error)
+        covariance = scale ** 2 * np.linalg.inv(normal)
+    except np.linalg.LinAlgError:
+        return None
+    motion, spread = corner_motion_error(delta, covariance, half)
+    return bool(motion < STILL or (motion < WITHIN and motion - SIGMAS * spread < STILL))
+
+
 def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int,
                 masks: list[np.ndarray] | None = None) -> tuple[bool, dict[int, str]]:
     """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
     its nearest registrable neighbour towards ``reference``, and the brackets too little
     of which is usable to register (:func:`hdrio.align.registration.unusable`, on
     ``masks``: :func:`usable_masks`): ``{bracket: why}``, not tested.
+
+    Each pair is measured at the strongest gradients of ``reference`` first; a pair
+    those leave too few points usable in both (the ends of a long ladder: a 9 x 2 EV
+    ladder's shortest pair had 186 of 20,000, and every still 9-bracket stack was
+    registered in full) is measured again at the strongest gradients of its bracket
+    farther from the reference, which sees what its neighbour sees best.
 
     Parameters
     ----------
@@ -195,17 +254,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     low, high = well_exposed_codes(code_max)
     ys, xs = _points(codes[reference], linear[reference])
     release(codes, reference)
-    n = ys.size
-    reads = {}
-    for j in range(count):  # (refused brackets are read too: a few hundred kB)
-        values, gx, gy, good = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
-        _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
-              good)
-        release(codes, j)
-        reads[j] = (values, gx, gy, good)
-    half = max(height, width) / 2.0
-    u = (xs - (width - 1) / 2.0) / half
-    v = (ys - (height - 1) / 2.0) / half
+    reads = _read_all(codes, linear, range(count), ys, xs, low, high)
     refused: dict[int, str] = {}
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     scale = (stride / base_factor(height, width)) ** 2
@@ -222,25 +271,12 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
             pairs.append((j, k))
             k = j
     for j, k in pairs:
-        template, gx, gy, ok_k = reads[k]
-        values, _, _, ok_j = reads[j]
-        good = ok_k & ok_j
-        if np.count_nonzero(good) < 200:
-            return False, refused  # too little in common to tell: measure properly
-        sd = np.stack([gx * half, gy * half, -v * gx * half + u * gy * half,
-                       np.ones(n)], axis=1)[good]
-        error = (values - template)[good]
-        error = error - np.median(error)
-        scale = 1.4826 * np.median(np.abs(error)) + 1e-6
-        weight = np.minimum(1.0, 1.345 * scale / (np.abs(error) + 1e-12))
-        weighted = sd * weight[:, None]
-        normal = weighted.T @ sd
-        try:
-            delta = np.linalg.solve(normal, weighted.T @ error)
-            covariance = scale ** 2 * np.linalg.inv(normal)
-        except np.linalg.LinAlgError:
-            return False, refused
-        motion, spread = corner_motion_error(delta, covariance, half)
-        if motion >= STILL and (motion >= WITHIN or motion - SIGMAS * spread >= STILL):
+        still = _pair_still(reads[k], reads[j], ys, xs, height, width)
+        if still is None:  # too little in common at the reference's points: j's own
+            own_ys, own_xs = _points(codes[j], linear[j], usable_only=True)
+            release(codes, j)
+            own = _read_all(codes, linear, (k, j), own_ys, own_xs, low, high)
+            still = _pair_still(own[k], own[j], own_ys, own_xs, height, width)
+        if not still:  # moved, or still too little to tell: measure properly
             return False, refused
     return True, refused

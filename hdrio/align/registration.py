@@ -36,8 +36,9 @@ from hdrio.align.pyramid import (
     downsample_valid,
     levels_above,
 )
+from hdrio.align.resolve import sampled_stack
 from hdrio.align.ward2003 import align_Ward2003
-from hdrio.align.warp import coverage, warp_codes
+from hdrio.align.warp import warp_codes
 from hdrio.errors import HdrioError
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.tables import estimate_tables
@@ -60,7 +61,7 @@ misfit of no motion (:func:`hdrio.align.lucaskanade.residual`)."""
 MTB_LEVELS = 6
 """Median-threshold-bitmap levels: shifts up to 63 base pixels (252 pixels at 24 MP)."""
 
-MIN_USABLE = 0.02
+MIN_USABLE = 0.005
 """A bracket is registered only when at least this fraction of the image is usable
 (every channel well exposed: unclipped and above the noise, :data:`hdrio.skips.WELL_EXPOSED`)
 in it and in the bracket it is registered to; otherwise it is left unwarped and the run
@@ -110,7 +111,8 @@ class Alignment:
                 continue
             name = files[j] if files else f"bracket {j}"
             if j in refused:
-                lines.append(f"{name}: not registered ({refused[j]}): left unwarped")
+                lines.append(f"{name}: not registered ({refused[j]}): merged unwarped only "
+                             "where no registered bracket sees the scene (motion layer)")
                 continue
             angle = math.degrees(math.atan2(warp[1, 0], warp[0, 0]))
             lines.append(f"{name}: shift {warp[0, 2]:+.2f}, {warp[1, 2]:+.2f} px, "
@@ -358,48 +360,6 @@ def align_masks(masks: np.ndarray, alignment: Alignment) -> np.ndarray:
         warped = warp_codes(mask, alignment.transforms[j], 1, interpolate=False)[..., 0]
         out[j] = scipy.ndimage.maximum_filter(warped, size=5) > 0
     return out
-
-
-EDGE_CODES = 24.0
-"""Pixels whose 3x3 neighbourhood spans more than this (8-bit codes, mean of channels)
-in some bracket are not sampled for the re-solve: resampled brackets differ from the
-reference at sharp edges, and such samples bent the solved response (merged median
-error 0.018-0.024 on the truth stacks; 0.013-0.015 without them; the still stack's
-0.012)."""
-
-
-def sampled_stack(stack: ExposureStack, alignment: Alignment, step: int
-                  ) -> tuple[ExposureStack, np.ndarray]:
-    """Every ``step``-th pixel of the reference's grid, each bracket resampled there
-    (:func:`~hdrio.align.warp.warp_codes`), and the ``(h, w)`` mask of pixels not to
-    sample (some bracket does not cover them, or they are on a sharp edge:
-    :data:`EDGE_CODES`): a small aligned stack for re-solving the response."""
-    height, width = stack.shape[:2]
-    rows, cols = -(-height // step), -(-width // step)
-    grid = np.array([[step, 0.0, 0.0], [0.0, step, 0.0], [0.0, 0.0, 1.0]])
-    codes = np.empty((stack.count, rows, cols, stack.shape[2]), stack.codes.dtype)
-    uncovered = np.zeros((rows, cols), bool)
-    for j in range(stack.count):
-        warp = alignment.transforms[j] @ grid
-        warp_codes(stack.codes[j], warp, stack.code_max, codes[j])
-        uncovered |= coverage(warp, rows, cols, 1, (height, width)) < 1
-        uncovered |= sharp_edges(codes[j], stack.code_max)
-    return replace(stack, codes=codes), uncovered
-
-
-def sharp_edges(codes: np.ndarray, code_max: int, step: int = 1) -> np.ndarray:
-    """``(H, W)``: pixels of one bracket ``(H, W, C)`` whose 3x3 neighbourhood spans more
-    than :data:`EDGE_CODES` (mean of channels). With ``step`` > 1 the test is made on
-    every ``step``-th pixel each way (neighbourhoods ``step`` times wider: more pixels
-    excluded, ``step^2`` times less work) and each result repeated over its block."""
-    import scipy.ndimage
-    height, width = codes.shape[:2]
-    grey = codes[::step, ::step].mean(axis=-1, dtype=np.float32)
-    spread = scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)
-    edges = spread > EDGE_CODES * code_max / 255.0
-    if step > 1:
-        edges = np.repeat(np.repeat(edges, step, axis=0), step, axis=1)[:height, :width]
-    return edges
 
 
 def register(stack: ExposureStack, response: CameraResponse, model: str,

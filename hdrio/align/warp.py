@@ -268,3 +268,22 @@ def coverage(warp: np.ndarray, height: int, width: int, factor: int,
               & (sy <= source_height - 0.5))
     cells = inside[:-1, :-1] & inside[1:, :-1] & inside[:-1, 1:] & inside[1:, 1:]
     return cells.astype(np.float32)
+
+
+def seen_elsewhere(codes: np.ndarray, code_max: int, others, cell: int) -> np.ndarray:
+    """``(rows, cols)`` cells of ``cell`` pixels where some bracket of ``others`` has
+    every channel strictly between 0 and ``code_max`` at half of the cell's pixels or
+    more (every second pixel each way): a registered bracket sees the scene there, so an
+    unregistered one, left unwarped, is not merged there (it would put the scene in the
+    wrong place)."""
+    count, height, width, channels = codes.shape
+    rows, cols = -(-height // cell), -(-width // cell)
+    seen = np.zeros((rows, cols), bool)
+    for j in others:
+        sample = codes[j, ::2, ::2]
+        inside = np.all((sample > 0) & (sample < code_max), axis=-1).astype(np.float32)
+        per = cell // 2
+        padded = np.zeros((rows * per, cols * per), np.float32)
+        padded[:inside.shape[0], :inside.shape[1]] = inside
+        seen |= padded.reshape(rows, per, cols, per).mean(axis=(1, 3)) >= 0.5
+    return seen

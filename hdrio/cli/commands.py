@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdrio.align import REFERENCE_RULE
 from hdrio.cli.merge_arguments import (
     add_arguments,
     merge_options,
@@ -206,7 +207,7 @@ def motion_lines(result: MergeResult) -> list[str]:
         said = "warped" if motion.warped else "not warped"
         resample = result.timings.get("resample", 0.0)
         lines.append(f"align:     {motion.alignment.model} to "
-                     f"{files[motion.alignment.reference]}, {said}, "
+                     f"{files[motion.alignment.reference]} ({REFERENCE_RULE}), {said}, "
                      f"{result.timings.get('align', 0) + resample:.2f} s"
                      + (f" (re-merging with resampling weights {resample:.2f} s)"
                         if resample else "")

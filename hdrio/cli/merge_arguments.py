@@ -32,7 +32,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from hdrio.align import ALIGN_MODES, DEGHOST_MODES
+from hdrio.align import ALIGN_MODES, DEGHOST_MODES, REFERENCE_RULE
 from hdrio.cli.values import (
     choice,
     encoding_name,
@@ -172,10 +172,10 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "noise model), Poisson, log (the tutorial's) or linear; in a chain, "
                 "--merge's own optional argument"),
     Option("--align", ("MODE",), "align", choice(*ALIGN_MODES), example=("off",),
-           help="register the brackets to the best-exposed one: auto (measure; warp only if "
+           help=f"register the brackets to {REFERENCE_RULE}: auto (measure; warp only if "
                 "some bracket moved more than 0.1 px; a bracket too clipped to register "
-                "is left unwarped and named), off, or a model to warp with: translation, "
-                "euclidean or homography (default auto)"),
+                "is merged only where no registered one sees the scene, and named), off, "
+                "or a model to warp with (default auto)"),
     Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
                 "people, leaves): auto or off (default auto)"),

@@ -153,6 +153,11 @@ def motion_attributes(result: MergeResult) -> dict[str, object]:
             " ".join(f"{v:.6g}" for v in warp.reshape(-1)[:8])
             for warp in alignment.transforms]
         attributes["hdrio:alignUncovered"] = float(motion.uncovered)
+        refused = [j for j, _ in alignment.refused]
+        if refused and motion.warped:  # merged unwarped where only they see the scene
+            attributes["hdrio:alignUnregistered"] = [
+                str(result.stack.files[j]) for j in refused]
+            attributes["hdrio:alignUnregisteredFraction"] = motion.unregistered_fraction()
     if motion.deghosting is not None:
         attributes["hdrio:deghostedFraction"] = float(motion.deghosting.fraction)
     return attributes
@@ -173,6 +178,12 @@ def merge_layers(result: MergeResult) -> dict[str, np.ndarray]:
     layers = {} if result.uncertainty is None else {"uncertainty": result.uncertainty}
     if options.motion_layer and result.motion.deghosting is not None:
         layers["motion"] = result.motion.deghosting.motion_mask(*result.radiance.shape[:2])
+        if result.motion.unregistered is not None:  # seen by an unregistered bracket only
+            height, width = result.radiance.shape[:2]
+            cells = result.motion.unregistered
+            size = result.motion.deghosting.cell
+            layers["motion"] = np.maximum(layers["motion"], np.repeat(np.repeat(
+                cells, size, 0), size, 1)[:height, :width].astype(np.float32))
     if options.clip_mask:
         limits = result.statistics.limits or (result.stack.code_max,) * result.stack.shape[2]
         layers["clipped"] = clipped_everywhere_mask(result.stack.codes[0], limits)

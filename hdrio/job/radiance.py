@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hdrio import jit
-from hdrio.align.deghost import CELL, comparametric_correction, consistency_variance
+from hdrio.align.comparametric import comparametric_correction, consistency_variance
+from hdrio.align.deghost import CELL
 from hdrio.align.motion import Motion
 from hdrio.align.registration import linear_tables
 from hdrio.align.resampling import remerge_resampled

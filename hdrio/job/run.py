@@ -71,10 +71,12 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")
     solved = response
-    response, tested = stages.deghost_stage(stack, response, motion, plan, resolve, say)
+    response, tested = stages.deghost_stage(stack, response, motion, plan, resolve,
+                                            prepared.excluded, say)
     clock.lap("deghost")
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
-    noise = stages.noise_stage(stack, response, plan, tested if response is solved else None)
+    noise = stages.noise_stage(stack, response, plan, tested if response is solved else None,
+                               prepared.excluded)
     merged = merging.merge_stage(merged_stack, response, plan, noise, say)
     skipped.early_stop_fraction = merged.early_stop_fraction
     clock.lap("merge")

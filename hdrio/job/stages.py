@@ -34,7 +34,7 @@ from hdrio.merge.ladder import (
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, code_variance_floor, fit_noise
+from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding
 from hdrio.radiometry.saved_response import check_response_fits
 from hdrio.response import RESPONSE_METHODS
 from hdrio.skips import classify
@@ -208,31 +208,41 @@ def nd_stage(stack: ExposureStack, response: CameraResponse, filtered: np.ndarra
     return replace(stack, channel_gains=gains), NDReport(stack.files, filtered, found)
 
 
+def stack_noise(stack: ExposureStack, response: CameraResponse,
+                excluded: np.ndarray | None) -> NoiseModel:
+    """The noise model of ``stack`` on ``response`` (:func:`fit_noise`), its floors those of
+    the brackets' encoding (camera RAW is linear), leaving out ``excluded``."""
+    return fit_noise(stack.codes, stack.exposures, response, encoding=noise_encoding(
+        stack.files, stack.code_max, is_raw_stack(stack)), exclude=excluded)
+
+
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
-                  plan: MergePlan, solve: Solve | None, say: Progress
-                  ) -> tuple[CameraResponse, NoiseModel | None]:
+                  plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
+                  say: Progress) -> tuple[CameraResponse, NoiseModel | None]:
     """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved without
     them (``solve``; ``None`` under exclusions): ``(response, noise)``, ``noise`` the
-    model the consistency test read (``None`` without deghosting)."""
+    model the consistency test read (``None`` without deghosting). ``excluded``: the
+    observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
+    noise fit and the test too."""
     if plan.deghosts:
         say("deghosting")
     noise = None
     if plan.deghosts and stack.count > 1:
-        noise = fit_noise(stack.codes, stack.exposures, response,
-                          code_floor=code_variance_floor(stack.files))
-    return deghost_step(stack, response, motion, plan.options.deghost, solve, noise), noise
+        noise = stack_noise(stack, response, excluded)
+    return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
+                        excluded), noise
 
 
 def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
-                fitted: NoiseModel | None) -> NoiseModel | None:
+                fitted: NoiseModel | None, excluded: np.ndarray | None
+                ) -> NoiseModel | None:
     """The noise model the merge reads, when the plan needs one: ``fitted`` (deghosting's,
     on this same response) or fitted here; else ``None``."""
     if not plan.fits_noise:
         return None
     if fitted is not None:
         return fitted
-    return fit_noise(stack.codes, stack.exposures, response,
-                     code_floor=code_variance_floor(stack.files))
+    return stack_noise(stack, response, excluded)
 
 
 def covering_bracket(stack: ExposureStack, prepared: Prepared, plan: MergePlan

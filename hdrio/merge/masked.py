@@ -13,13 +13,13 @@ table's term. A dropped bracket
 (``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
 object that clips says nothing about the scene behind it. Weights are given on a grid
 of cells and interpolated bilinearly between cell centres (the masks are feathered:
-no seam). Where some channel is left with no weight because every kept bracket is
-saturated there, but a dropped bracket had weight, the pixel keeps the kernel's merge
-(the dropped bracket was the only one to see it: a shorter bracket under a clipped
-reference; with one channel taken from elsewhere, the cloud edge of frobisher_001
-turned magenta and a cell grey); otherwise a channel with no weight (a dark reference,
-a channel no bracket saw) takes the estimate of the most-kept bracket not saturated
-there.
+no seam). A channel with no weight (a dark reference, a channel no bracket saw) takes
+the estimate of the most-kept bracket not saturated there, or where every kept bracket
+is saturated, the saturated estimate of the shortest of the most-kept ones: a lower
+bound, what the kept brackets saw. (Deghosting never drops a shorter bracket that stands
+in for a clipped reference, :mod:`hdrio.align.consistency`; one it drops there is
+inconsistent with the reference's clip, a moving object: keeping the kernel's merge
+there, as this pass once did, kept that object a second time.)
 """
 
 from __future__ import annotations
@@ -65,11 +65,9 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
                                 + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
                         if scaled:
                             m[j] *= factors[j, cy, cx]
-                    only_dropped = False
                     for c in range(channels):
                         numerator = 0.0
                         denominator = 0.0
-                        unmasked = 0.0
                         best = -1
                         for j in range(count - 1, -1, -1):
                             z = codes[j, y, x, c]
@@ -80,21 +78,16 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
                             reset = 1.0 - m[j] * saturated
                             numerator = numerator * reset + m[j] * terms[j, c, z].real
                             denominator = denominator * reset + m[j] * terms[j, c, z].imag
-                            unmasked = unmasked * (1.0 - saturated) + terms[j, c, z].imag
                             if not saturated and (best < 0 or m[j] > m[best]):
                                 best = j
                         if denominator > 0.0:
                             value = numerator / denominator
                         else:
-                            # Every kept bracket saturated here, a dropped one not.
-                            only_dropped |= unmasked > 0.0 and (best < 0 or m[best] == 0.0)
-                            j = best if best >= 0 else int(np.argmax(m))
+                            j = best if best >= 0 and m[best] > 0.0 else int(np.argmax(m))
                             value = estimates[j, c, codes[j, y, x, c]]
                         if log_domain:
                             value = math.exp(min(max(value, LOG_FLOAT32_TINY), LOG_FLOAT32_MAX))
                         values[c] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
-                    if only_dropped:
-                        continue  # only dropped brackets saw it: the kernel's merge stands
                     for c in range(channels):
                         out[y, x, c] = values[c]
 

@@ -17,7 +17,7 @@ from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.method_registry import MethodRegistry
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.estimators import ESTIMATORS, Estimator
-from hdrio.radiometry.noise import NoiseModel, code_variance_floor, fit_noise
+from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding
 from hdrio.stack import ExposureStack
 
 MergeFunction = Callable[..., tuple[np.ndarray, MergeStatistics]]
@@ -30,7 +30,7 @@ def merge_with(estimator: Estimator) -> MergeFunction:
               noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
         if estimator.needs_noise and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,
-                              code_floor=code_variance_floor(stack.files))
+                              encoding=noise_encoding(stack.files, stack.code_max))
         weights = (estimator.noise_weights(response, stack.channel_exposures, noise)
                    if estimator.needs_noise else None)
         limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,

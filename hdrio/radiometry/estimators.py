@@ -43,22 +43,14 @@ import numpy as np
 
 from hdrio.method_registry import MethodRegistry
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, observation_variance, usable_codes
+from hdrio.radiometry.noise import (
+    NoiseModel,
+    observation_variance,
+    supported_range,
+    usable_codes,
+)
 from hdrio.radiometry.tables import code_weights
 from hdrio.stack import exposure_columns
-
-
-def supported_range(response: CameraResponse) -> np.ndarray:
-    """``(levels, C)``: codes from the first to the last the solve supported, per channel.
-
-    Codes inside that range that no sample fell on (most of them at 16 bits, where the
-    solve sees 1024 levels) have ``g`` interpolated between supported neighbours: as good
-    as their neighbours, so they keep their weight.
-    """
-    supported = np.asarray(response.supported, dtype=bool)
-    after_first = np.logical_or.accumulate(supported, axis=0)
-    before_last = np.logical_or.accumulate(supported[::-1], axis=0)[::-1]
-    return after_first & before_last
 
 
 def weights_inverse_variance(response: CameraResponse, exposures, noise: NoiseModel

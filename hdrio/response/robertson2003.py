@@ -73,8 +73,8 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     # Imported here: hdrio.radiometry.noise imports this package's curve module.
     from hdrio.io.staging import candidate_stride
     from hdrio.radiometry.noise import (
-        code_variance_floor,
         fit_noise,
+        noise_encoding,
         noise_grid,
         observation_variance,
         usable_codes,
@@ -86,7 +86,7 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                                  solve_identical_once=solve_identical_once)
     grid = noise_grid(stack.codes)  # (P, n, C)
     noise = fit_noise(stack.codes, stack.exposures, start, grid=grid,
-                      code_floor=code_variance_floor(stack.files))
+                      encoding=noise_encoding(stack.files, stack.code_max))
     keep = None
     if exclude is not None:
         stride = candidate_stride(*stack.shape[:2])

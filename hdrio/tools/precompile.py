@@ -15,14 +15,17 @@ from hdrio.parallel import die_with_parent
 
 
 def _compile_merge() -> None:
-    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's)."""
+    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), and the
+    noise fit's look for clipped neighbours."""
     from hdrio.merge.weighted_mean import merge_brackets
+    from hdrio.radiometry.noise import near_clipping
     from hdrio.stack import ExposureStack
     from hdrio.tools.synthetic import gamma_inverse_response
 
     codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
     stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
+    near_clipping(codes, 2, 250)
 
 
 def _compile_motion() -> None:

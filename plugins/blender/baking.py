@@ -199,6 +199,9 @@ def response_to_json(response: CameraResponse, label: str,
         data["noise"] = {"shot": np.asarray(noise.shot).tolist(),
                          "read": np.asarray(noise.read).tolist(),
                          "code": np.asarray(noise.code).tolist(), "source": noise.source}
+        for term in ("relative", "common"):  # the weights read ``common`` (JPEG's)
+            if getattr(noise, term) is not None:
+                data["noise"][term] = np.asarray(getattr(noise, term)).tolist()
     return json.dumps(data)
 
 
@@ -212,7 +215,10 @@ def response_from_json(text: str) -> tuple[CameraResponse, str, NoiseModel | Non
                               method=str(data["method"]))
     noise = data.get("noise")
     if noise is not None:
+        extra = {term: np.asarray(noise[term], dtype=np.float64)
+                 for term in ("relative", "common") if term in noise}
         noise = NoiseModel(np.asarray(noise["shot"], dtype=np.float64),
                            np.asarray(noise["read"], dtype=np.float64),
-                           np.asarray(noise["code"], dtype=np.float64), str(noise["source"]))
+                           np.asarray(noise["code"], dtype=np.float64), str(noise["source"]),
+                           **extra)
     return response, str(data["label"]), noise
