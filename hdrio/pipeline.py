@@ -46,6 +46,7 @@ from hdrio.merge.ladder import (
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.merge.noise import code_variance_floor, fit_noise
+from hdrio.merge.saturation import SolveFilter, solve_filter
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge_job import MergeOptions, MergeResult, PhaseClock, Progress
 from hdrio.merge_output import (
@@ -130,12 +131,22 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
             if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
                 stack = unfiltered(stack, filtered)  # a filter's cast would bend g
-            return RESPONSE_METHODS[method](
-                stack, smoothing=options.smoothing, weighting=options.weighting,
-                sampling=options.sampling, samples=options.samples, exclude=exclude,
-                seed=options.seed,
-                **({"solve_identical_once": "channels" in skips} if method != "linear"
-                   else {}))
+
+            def solved_with(dropped: SolveFilter | None = None) -> CameraResponse:
+                return RESPONSE_METHODS[method](
+                    stack, smoothing=options.smoothing, weighting=options.weighting,
+                    sampling=options.sampling, samples=options.samples, exclude=exclude,
+                    seed=options.seed,
+                    **({"solve_identical_once": "channels" in skips,
+                        "dropped": dropped} if method != "linear" else {}))
+
+            response = solved_with()
+            if method == "linear":
+                return response
+            # A camera that mixes its channels after the clip: partly clipped
+            # observations are biased in every channel, and would bend the curve.
+            dropped = solve_filter(options.saturation, stack, response)
+            return response if dropped is None else solved_with(dropped)
 
         def solved(stack: ExposureStack) -> CameraResponse:
             try:
@@ -234,12 +245,11 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
         unseen = remerge_excluded(stack.codes, stack.channel_exposures, response, radiance,
                                   excluded,
                                   motion.keep, CELL, weights, merge_domain(method),
-                                  options.saturation == "channel")
+                                  statistics.policy)
         statistics = masked_statistics(stack.codes, excluded, stack.code_max, statistics)
     elif merged is stack:  # not reduced to one covering bracket
         remerge_step(stack, response, radiance, motion, weights, merge_domain(method),
-                     not statistics.pixel_rule, statistics.limits,  # the policy's
-                     noise if noise is not None else before)
+                     statistics.policy, noise if noise is not None else before)
         resampled = motion.warped
     # After a warp the re-merge runs with or without deghosting (the resampling weights,
     # deghosting's drops fused into the same pass): timed as "resample".
@@ -251,7 +261,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
             radiance, merged.codes[0],
             statistics.limits or (merged.code_max,) * merged.shape[2],
             estimate_tables(response, merged.channel_exposures, "linear")[0],
-            statistics.pixel_rule,
+            statistics.policy.neutral,
             None if excluded is None or merged is not stack else ~excluded[0])
         skipped.highlights = highlights is None
         clock.lap("highlights")
@@ -259,8 +269,7 @@ def merge_stack(stack: ExposureStack, options: MergeOptions = MergeOptions(),
     if options.uncertainty:
         say("predicting each pixel's uncertainty")
         uncertainty = relative_uncertainty(merged, response, weights, noise,
-                                           merge_domain(method),
-                                           "pixel" if statistics.pixel_rule else "channel")
+                                           merge_domain(method), statistics.policy)
     if is_raw_stack(stack):  # LibRaw gave linear XYZ: into the working space
         radiance = xyz_to_working(radiance, options.colourspace)
     clock.lap("merge")

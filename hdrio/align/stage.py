@@ -33,6 +33,7 @@ from hdrio.errors import HdrioError
 from hdrio.merge.debevec1997 import merge_tables
 from hdrio.merge.masked import remerge_masked
 from hdrio.merge.noise import NoiseModel, fit_noise, observation_variance
+from hdrio.merge.saturation import ClipPolicy
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -159,12 +160,12 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
 
 def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.ndarray,
-                 motion: Motion, weights: np.ndarray, domain: str, per_channel: bool,
-                 limits: tuple[int, ...], noise: NoiseModel | None = None) -> None:
+                 motion: Motion, weights: np.ndarray, domain: str, policy: ClipPolicy,
+                 noise: NoiseModel | None = None) -> None:
     """Re-merge, in place in ``radiance``, the pixels where ``motion.keep`` drops some
     bracket (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights
     (:func:`hdrio.merge.estimators.effective_weights`) in its ``domain`` and its
-    saturation ``limits`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.limits`).
+    saturation ``policy`` (:attr:`hdrio.merge.debevec1997.MergeStatistics.policy`).
 
     When the brackets were warped, every warped bracket's weight is also lowered where
     its resampling error outweighs its noise (:mod:`hdrio.align.resampling`; ``noise``:
@@ -175,9 +176,8 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
                                     weights)
 
     def remerge(codes, keep, out, first_row=0, rows=None, factors=None):
-        remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out, limits, first_row=first_row, rows=rows,
-                       factors=factors)
+        remerge_masked(codes, keep, CELL, terms, estimates, policy, domain == "log", out,
+                       first_row=first_row, rows=rows, factors=factors)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, radiance)
@@ -186,7 +186,7 @@ def remerge_step(stack: ExposureStack, response: CameraResponse, radiance: np.nd
         noise = fit_noise(stack.codes, stack.exposures, response)
     reference = motion.alignment.reference
     allowed = consistency_variance(response, stack.exposures, noise)
-    remerge_resampled(stack.codes, stack.code_max, limits, motion.keep, CELL, reference,
+    remerge_resampled(stack.codes, stack.code_max, policy.limits, motion.keep, CELL, reference,
                       comparametric_correction(stack.codes, linear_tables(
                           response, stack.exposures), allowed, reference),
                       observation_variance(response, stack.exposures, noise), allowed,

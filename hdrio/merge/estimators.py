@@ -48,7 +48,7 @@ from hdrio.merge.noise import (
     observation_variance,
     usable_codes,
 )
-from hdrio.merge.saturation import policy_limits
+from hdrio.merge.saturation import ClipPolicy, clip_policy
 from hdrio.registry import MethodRegistry
 from hdrio.response.curve import CameraResponse
 from hdrio.stack import ExposureStack, exposure_columns
@@ -117,19 +117,22 @@ def merge_domain(method: str) -> str:
 def _merge(method: str):
     def merge(stack: ExposureStack, response: CameraResponse, weighting: str = "Debevec1997",
               saturation: str = "auto", early_stop: bool = True,
-              noise: NoiseModel | None = None) -> tuple[np.ndarray, MergeStatistics]:
+              noise: NoiseModel | None = None, policy: ClipPolicy | None = None
+              ) -> tuple[np.ndarray, MergeStatistics]:
         if method in NOISE_AWARE and noise is None:
             noise = fit_noise(stack.codes, stack.exposures, response,
                               code_floor=code_variance_floor(stack.files))
         weights = merge_weights(method, response, stack.channel_exposures, noise)
-        limits, pixel_rule = policy_limits(saturation, stack.codes, response, noise,
-                                           stack.exposures)
+        if policy is None:
+            policy = clip_policy(saturation, stack.codes, response, noise, stack.exposures)
         return merge_brackets(stack, response, weighting, merge_domain(method), saturation,
-                              early_stop, weights, limits, pixel_rule)
+                              early_stop, weights, policy)
 
     merge.__name__ = f"merge_{method.replace('-', '_')}"
     merge.__doc__ = (f"Merge ``stack`` with the ``{method}`` estimator (see "
-                     ":mod:`hdrio.merge.estimators`); ``noise`` is fitted when not given.")
+                     ":mod:`hdrio.merge.estimators`); ``noise`` is fitted when not given, "
+                     "``policy`` (``saturation`` decided on the stack, "
+                     ":func:`hdrio.merge.saturation.clip_policy`) decided when not given.")
     return merge
 
 
