@@ -43,6 +43,10 @@ The test is a function of the two brackets' codes at one pixel, through tables o
 ``x_j`` and ``var x_j`` per code: the merge kernel (:mod:`hdrio.merge.kernel`), the
 masked re-merge (:mod:`hdrio.merge.masked`), the uncertainty layer and the Blender
 add-on's node graph apply the same test from the same tables (:class:`ClipTables`).
+
+:func:`dropped_channels` is compiled into those modules' cached kernels: numba's cache
+checks only each kernel's own file, so after editing this one in a checkout, delete
+``hdrio/merge/__pycache__/*.nb*`` (an install writes every file anew, which does it).
 """
 
 from __future__ import annotations
@@ -114,11 +118,12 @@ def clip_tables(response: CameraResponse, exposures, noise: NoiseModel,
 
 
 @njit(inline="always", **INNER)
-def dropped_channels(longer, shorter, base, j, policy):  # pragma: no cover - compiled
+def dropped_channels_against(longer, shorter, base, j, k, policy):  # pragma: no cover
     """The channels of bracket ``j``'s observation at the pixel whose channels start at
     ``longer[base]`` that the policy drops besides those at or above their limits, as
     a bit set (bit ``c``: channel ``c``; every bit: the whole observation); ``shorter``
-    holds bracket ``j - 1``'s codes at the same place (read only for ``j >= 1``).
+    holds bracket ``k``'s codes at the same place (``k < j``: the bracket it is tested
+    against, the next shorter one kept; read only for ``j >= 1``).
 
     ``policy`` is :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`: ``(limits,
     gates, rule, neutral, estimates, variances, thresholds)``, the thresholds ``(P, C)``
@@ -142,11 +147,17 @@ def dropped_channels(longer, shorter, base, j, policy):  # pragma: no cover - co
         y = shorter[base + c]
         if z >= limits[c]:
             continue
-        d = estimates[j, c, z] - estimates[j - 1, c, y]
+        d = estimates[j, c, z] - estimates[k, c, y]
         if y >= limits[c] or d * d > threshold[j, c] * (
-                variances[j, c, z] + variances[j - 1, c, y]):
+                variances[j, c, z] + variances[k, c, y]):
             return whole
     return 0
+
+
+@njit(inline="always", **INNER)
+def dropped_channels(longer, shorter, base, j, policy):  # pragma: no cover - compiled
+    """:func:`dropped_channels_against` the next shorter bracket, ``j - 1``."""
+    return dropped_channels_against(longer, shorter, base, j, max(j - 1, 0), policy)
 
 
 @njit(inline="always", **INNER)

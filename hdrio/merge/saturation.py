@@ -10,8 +10,8 @@ clipped cloud's edge). On brackets rendered through such a camera
 on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 ``auto`` (the default)
-    each partly clipped observation (a channel at or above its limit, another below)
-    is tested against the next shorter bracket (:mod:`hdrio.merge.cliptest`): dropped
+    each observation near the clip (a channel at or above its gate, another below its
+    limit) is tested against the next shorter bracket (:mod:`hdrio.merge.cliptest`): dropped
     whole where its other channels disagree with it by more than noise (by more,
     where the stack does not show its channels mixed after the clip), else its clipped
     channels alone. In the shortest bracket, which has nothing to be tested
