@@ -33,6 +33,7 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
+from hdrio.merge.saturation import SolveFilter, solve_filter
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding
 from hdrio.radiometry.saved_response import check_response_fits
@@ -114,7 +115,11 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
 
 def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve:
     """The solve ``--response`` names (the linear response for camera RAW), as
-    ``solve(stack, exclude)``: alignment and deghosting re-solve with it."""
+    ``solve(stack, exclude)``: alignment and deghosting re-solve with it.
+
+    Where the stack mixes its channels after the clip, the solve is run again without
+    the observations at or reaching the clip (:func:`hdrio.merge.saturation.solve_filter`:
+    they are biased in every channel, and would bend the curve)."""
     options, filtered = plan.options, prepared.filtered
     method = "linear" if is_raw_stack(prepared.stack) else options.response
     say(f"camera response: {method}" + ("" if method == "linear"
@@ -124,10 +129,18 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve
     def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
         if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
             stack = unfiltered(stack, filtered)  # a filter's cast would bend g
-        return RESPONSE_METHODS[method](
-            stack, smoothing=options.smoothing, weighting=options.weighting,
-            sampling=options.sampling, samples=options.samples, exclude=exclude,
-            seed=options.seed, **extra)
+
+        def solved_with(dropped: SolveFilter | None = None) -> CameraResponse:
+            return RESPONSE_METHODS[method](
+                stack, smoothing=options.smoothing, weighting=options.weighting,
+                sampling=options.sampling, samples=options.samples, exclude=exclude,
+                seed=options.seed, **extra, **({"dropped": dropped} if dropped else {}))
+
+        response = solved_with()
+        if method == "linear":
+            return response
+        dropped = solve_filter(options.saturation, stack, response)
+        return response if dropped is None else solved_with(dropped)
 
     return solve
 

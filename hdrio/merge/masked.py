@@ -7,14 +7,19 @@ overwrites them:
 
 ``sum = sum * (1 - m_j s_j) + m_j t_j(z_j)`` over the brackets, longest first,
 
-with ``s_j`` 1 where the code is at or above the saturation policy's limit (the
-kernel's reset, so ``m_j = 1`` everywhere gives the kernel's result) and ``t_j`` the
+with ``s_j`` 1 where the code is at or above the saturation policy's limit or the policy
+drops the channel (:func:`hdrio.merge.cliptest.dropped_channels`: the kernel's
+reset, so ``m_j = 1`` everywhere gives the kernel's result) and ``t_j`` the
 table's term. A dropped bracket
 (``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
 object that clips says nothing about the scene behind it. Weights are given on a grid
 of cells and interpolated bilinearly between cell centres (the masks are feathered:
-no seam). A channel with no weight (a dark reference, a channel no bracket saw) takes
-the estimate of the most-kept bracket not saturated there, or where every kept bracket
+no seam). A channel saturated in every bracket keeps the kernel's lower bound, and so
+does one dropped from the shortest bracket where that bracket is kept (so from every
+one: the most-kept bracket's estimate of its clipped code was the speckled yellow fringe
+along the hand-held canal stack's sky, whose blue is at its limit even in the shortest
+bracket). Otherwise a channel with no weight (a dark reference, a channel no bracket
+saw) takes the estimate of the most-kept bracket not saturated there, or where every kept bracket
 is saturated, the saturated estimate of the shortest of the most-kept ones: a lower
 bound, what the kept brackets saw. (Deghosting never drops a shorter bracket that stands
 in for a clipped reference, :mod:`hdrio.align.consistency`; one it drops there is
@@ -30,7 +35,9 @@ import numpy as np
 from numba import njit, prange
 
 from hdrio.jit import size_numba_threads
+from hdrio.merge.cliptest import dropped_channels_against
 from hdrio.merge.kernel import FLOAT32_MAX, FLOAT32_TINY, LOG_FLOAT32_MAX, LOG_FLOAT32_TINY
+from hdrio.merge.saturation import ClipPolicy
 
 
 @njit(cache=True, nogil=True)
@@ -43,14 +50,16 @@ def _corner(position, size):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
-             log_domain, out, first, factors):  # pragma: no cover - compiled
+def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, out, first,
+             factors, skip):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
+    limits = policy[0]
     height = min(height, first + touched.shape[0] * cell)  # the band's rows
     rows, cols = keep.shape[1], keep.shape[2]
     scaled = factors.shape[1] > 0
     for cy in prange(touched.shape[0]):
         m = np.empty(count)
+        dropped = np.empty(count, dtype=np.int64)
         values = np.empty(channels)
         for cx in range(cols):
             if not touched[cy, cx]:
@@ -65,21 +74,40 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
                                 + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
                         if scaled:
                             m[j] *= factors[j, cy, cx]
+                    for j in range(count):
+                        # The clip test reads the next shorter bracket, or (``skip``)
+                        # the next one kept here: one masked out says nothing of it.
+                        k = max(j - 1, 0)
+                        while skip and k > 0 and m[k] < 0.5:
+                            k -= 1
+                        if skip and j > 0 and m[k] < 0.5 and policy[2] == 2:
+                            dropped[j] = 0  # no shorter bracket kept: nothing to test
+                        else:
+                            dropped[j] = dropped_channels_against(
+                                codes[j, y, x], codes[k, y, x], 0, j, k, policy)
                     for c in range(channels):
                         numerator = 0.0
                         denominator = 0.0
                         best = -1
                         for j in range(count - 1, -1, -1):
                             z = codes[j, y, x, c]
-                            saturated = z >= limits[c]
-                            if not per_channel:
-                                for k in range(channels):
-                                    saturated |= codes[j, y, x, k] >= limits[k]
+                            gone = (dropped[j] >> c) & 1 == 1
+                            saturated = z >= limits[c] or gone
+                            # A code at its limit has no term; a channel the policy
+                            # drops none either, whatever its code.
+                            term = terms[j, c, z] * (0.0 if gone else 1.0)
                             reset = 1.0 - m[j] * saturated
-                            numerator = numerator * reset + m[j] * terms[j, c, z].real
-                            denominator = denominator * reset + m[j] * terms[j, c, z].imag
+                            numerator = numerator * reset + m[j] * term.real
+                            denominator = denominator * reset + m[j] * term.imag
                             if not saturated and (best < 0 or m[j] > m[best]):
                                 best = j
+                        if (denominator <= 0.0 and best < 0) or (saturated and m[0] >= 0.5):
+                            # Saturated in every bracket, or dropped from the shortest one
+                            # (so from every one) where it is kept: the kernel's lower
+                            # bound stands (not the most-kept bracket's estimate of a
+                            # clipped code, nor the longer ones' a soft reset leaves).
+                            values[c] = out[y, x, c]
+                            continue
                         if denominator > 0.0:
                             value = numerator / denominator
                         else:
@@ -93,11 +121,9 @@ def _remerge(codes, keep, touched, cell, terms, estimates, limits, per_channel,
 
 
 def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.ndarray,
-                   estimates: np.ndarray, code_max: int, per_channel: bool,
-                   log_domain: bool, radiance: np.ndarray,
-                   limits: tuple[int, ...] | np.ndarray | None = None, *,
-                   first_row: int = 0, rows: int | None = None,
-                   factors: np.ndarray | None = None) -> int:
+                   estimates: np.ndarray, policy: ClipPolicy, log_domain: bool,
+                   radiance: np.ndarray, *, first_row: int = 0, rows: int | None = None,
+                   factors: np.ndarray | None = None, skip_dropped: bool = False) -> int:
     """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
     weight is below 1; returns how many cells were re-merged.
 
@@ -110,19 +136,23 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         (float32 or float64; ``cell`` 1 gives per-pixel weights).
     terms, estimates
         :func:`hdrio.radiometry.tables.merge_tables`' tables, ``(P, C, levels)``.
-    per_channel, log_domain
-        The saturation policy (``channel``) and the merge domain (``log``).
-    limits
-        ``(C,)`` the first code the merge's saturation policy drops per channel
-        (:attr:`hdrio.merge.weighted_mean.MergeStatistics.limits`; ``Z_max`` when not
-        given): a code at or above it resets the sums as a saturated one, so that keep
-        weights of 1 give the kernel's merge (the ``auto`` policy's limits are below
-        ``Z_max`` by the noise margin and the shoulders).
+    policy, log_domain
+        The merge's saturation policy (:attr:`hdrio.merge.weighted_mean.MergeStatistics.
+        policy`: a code at or above its limit, or an observation it drops whole, resets
+        the sums as a saturated one, so that keep weights of 1 give the kernel's merge)
+        and domain (``log``).
     first_row, rows, factors
         A band: only rows ``first_row .. first_row + rows - 1`` (``first_row`` a multiple
         of ``cell``; all rows by default) are re-merged. ``factors`` ``(P, cell rows of
         the band, cols)`` multiply the keep weights per cell, not interpolated
         (:mod:`hdrio.align.resampling`); the cells where one is below 1 are re-merged too.
+    skip_dropped
+        The clip test (:mod:`hdrio.merge.cliptest`) reads the next shorter bracket kept
+        at the pixel (keep weight 0.5 or more) rather than the next shorter one: for
+        observations excluded by the user (``--mask``, ``--exclude-color``), whose codes
+        say nothing of the pixel. Deghosting's drops are not skipped: at a clip's edge a
+        partly clipped reference can make the brackets below it look moving, and the
+        test must still see them.
     """
     import scipy.ndimage
     rows = codes.shape[1] - first_row if rows is None else rows
@@ -139,15 +169,13 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         touched = touched | (factors < 1.0).any(axis=0)
     if not touched.any():
         return 0
-    channels = codes.shape[-1]
-    limits = np.full(channels, code_max, np.int64) if limits is None else \
-        np.clip(np.asarray(limits, np.int64), 1, code_max)
+    arguments = policy.kernel_args()
     terms = np.array(terms, np.complex128)  # a copy: dropped codes never count
-    for c, limit in enumerate(limits):
+    for c, limit in enumerate(arguments[0]):
         terms[:, c, limit:] = 0.0
     size_numba_threads()
     _remerge(codes, np.ascontiguousarray(
         keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
-             terms, np.ascontiguousarray(estimates, np.float64), limits, per_channel,
-             log_domain, radiance, first_row, np.ascontiguousarray(factors, np.float32))
+             terms, np.ascontiguousarray(estimates, np.float64), arguments, log_domain,
+             radiance, first_row, np.ascontiguousarray(factors, np.float32), skip_dropped)
     return int(np.count_nonzero(touched))
