@@ -61,13 +61,17 @@ class Merged:
 
 
 def merge_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
-                noise: NoiseModel | None, say: Progress) -> Merged:
-    """The weighted mean of ``stack``'s brackets with the plan's estimator."""
+                noise: NoiseModel | None, say: Progress, *,
+                excluded: np.ndarray | None = None) -> Merged:
+    """The weighted mean of ``stack``'s brackets with the plan's estimator, under the
+    saturation policy decided on the observations not ``excluded`` (``(P, H, W)``:
+    ``--mask``, ``--exclude-color``; :func:`hdrio.merge.saturation.clip_policy`)."""
     options, estimator = plan.options, plan.estimator
     jit.announce(say, "merge")
     say(f"merging {stack.count} brackets ({estimator.name}, {estimator.domain} domain)")
     weights = plan.weight_tables(response, stack.channel_exposures, noise)
-    policy = clip_policy(options.saturation, stack.codes, response, noise, stack.exposures)
+    policy = clip_policy(options.saturation, stack.codes, response, noise, stack.exposures,
+                         exclude=excluded)
     radiance, statistics = merge_brackets(
         stack, response, options.weighting, estimator.domain, options.saturation,
         early_stop="early-stop" in plan.skips, weights=weights, policy=policy)

@@ -77,10 +77,10 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
     noise = stages.noise_stage(stack, response, plan, tested if response is solved else None,
                                prepared.excluded)
-    merged = merging.merge_stage(merged_stack, response, plan, noise, say)
+    excluded = prepared.excluded if merged_stack is stack else None
+    merged = merging.merge_stage(merged_stack, response, plan, noise, say, excluded=excluded)
     skipped.early_stop_fraction = merged.early_stop_fraction
     clock.lap("merge")
-    excluded = prepared.excluded if merged_stack is stack else None
     unseen, resampled = merging.remerge_stage(stack, merged_stack, response, merged, plan,
                                               excluded, motion,
                                               noise if noise is not None else tested)

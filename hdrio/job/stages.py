@@ -139,7 +139,7 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve
         response = solved_with()
         if method == "linear":
             return response
-        dropped = solve_filter(options.saturation, stack, response)
+        dropped = solve_filter(options.saturation, stack, response, exclude=exclude)
         return response if dropped is None else solved_with(dropped)
 
     return solve

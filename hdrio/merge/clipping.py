@@ -12,7 +12,7 @@ import numpy as np
 
 from hdrio.merge.cliptest import ClipTables
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, noise_grid
+from hdrio.radiometry.noise import NoiseModel, grid_stride, noise_grid
 
 _PILE_UP = 8.0  # a white level's count is this many times its neighbours' median
 _TOP_FRACTION = 0.75  # white levels are looked for above this fraction of the code range
@@ -26,6 +26,21 @@ _SPREAD_FLOOR = 0.01  # the least spread (ln E): codes' rounding, 16-bit data
 _INTERIOR_RADIUS = 4  # pixels: partly clipped evidence only where the clip extends this far
 MIXING_GRID_LIMIT = 2**16  # pixels sampled for the white levels and the mixing test
 _MID = (0.1,)  # the least code (fraction of Z_max) of the channels compared
+
+
+def unexcluded(shape: tuple[int, ...], exclude: np.ndarray | None,
+               limit: int = MIXING_GRID_LIMIT) -> np.ndarray | None:
+    """``(n,)`` booleans on the grid of :func:`~hdrio.radiometry.noise.noise_grid` of codes
+    of ``shape`` ``(P, H, W, C)`` (at most ``limit`` pixels): the pixels no bracket
+    excludes (``exclude``: ``(P, H, W)`` or ``(H, W)``, ``--mask`` and ``--exclude-color``),
+    or ``None`` when nothing is excluded. What the user masked out is no evidence of a
+    clip: a masked block of one colour piled up at a code, as a white level below it."""
+    if exclude is None:
+        return None
+    count, height, width = shape[:3]
+    stride = grid_stride(height, width, limit)
+    held = np.broadcast_to(exclude, (count, height, width))[:, ::stride, ::stride]
+    return ~held.reshape(count, -1).any(axis=0)
 
 
 def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:

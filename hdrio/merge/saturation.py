@@ -52,6 +52,7 @@ from hdrio.merge.clipping import (
     clip_interior,
     saturation_limits,
     test_spreads,
+    unexcluded,
 )
 from hdrio.merge.cliptest import (
     APART_SIGMAS,
@@ -160,7 +161,8 @@ class ClipPolicy:
 
 
 def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
-                noise: NoiseModel | None, exposures=None) -> ClipPolicy:
+                noise: NoiseModel | None, exposures=None, *,
+                exclude: np.ndarray | None = None) -> ClipPolicy:
     """``policy`` (:data:`SATURATION_POLICIES`) decided on ``codes`` ``(P, H, W, C)``.
 
     ``channel``, ``pixel``: at the top code. ``safe``: the pixel rule at the white levels
@@ -172,6 +174,9 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
     :func:`~hdrio.merge.clipping.channel_mixing` (inside clips,
     :func:`~hdrio.merge.clipping.clip_interior`) exceeds 1; without ``exposures``
     (seconds) or with one bracket, as ``safe``. ``noise`` ``None``: the codes' rounding alone.
+    ``exclude`` (``(P, H, W)`` or ``(H, W)``, ``--mask`` and ``--exclude-color``): pixels
+    of the sample where some bracket is excluded are left out of every measure
+    (:func:`~hdrio.merge.clipping.unexcluded`).
     """
     if policy not in SATURATION_POLICIES:
         raise ValueError(f"saturation policy must be one of {SATURATION_POLICIES}, "
@@ -181,14 +186,17 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
         return ClipPolicy.at_top(response.code_max, channels, policy)
     if noise is None:
         noise = NoiseModel.quantisation_only(channels)
-    grid = noise_grid(codes, MIXING_GRID_LIMIT)
+    full = noise_grid(codes, MIXING_GRID_LIMIT)
+    seen = unexcluded(codes.shape, exclude)
+    grid = full if seen is None else full[:, seen]
     limits = saturation_limits(codes, response, noise, grid)
     if policy == "safe" or exposures is None or codes.shape[0] < 2:
         return ClipPolicy(limits, rule="pixel", neutral=True)
     clipped = np.any(grid >= limits, axis=-1)
     if not clipped.any():  # nothing clips: each channel dropped alone, nothing tested
         return ClipPolicy(limits)
-    interior = clip_interior(codes, limits, grid=grid)
+    interior = clip_interior(codes, limits, grid=full)
+    interior = interior if seen is None else interior[:, seen]
     mixing = channel_mixing(grid, response, exposures, limits, interior)
     gates = clip_gates(response, grid, limits, exposures)
     neutral = bool(mixing > MIXING_SHIFT)
@@ -228,8 +236,8 @@ class SolveFilter:
         return f"limits {', '.join(str(int(v)) for v in self.limits)} and their reach"
 
 
-def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse
-                 ) -> SolveFilter | None:
+def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse, *,
+                 exclude: np.ndarray | None = None) -> SolveFilter | None:
     """The observations the response solve leaves out (``dropped`` of
     :func:`hdrio.response.debevec1997.response_Debevec1997`), or ``None`` to keep the
     solve as it was.
@@ -245,18 +253,18 @@ def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse
     off-diagonal terms), so the observations that the next shorter bracket says reach a
     limit go too (:attr:`SolveFilter.reach`, by ``response``: the red curve was 5 % off
     at the top codes without them). Elsewhere a partly clipped observation's unclipped
-    channels are as good as any, and the solve keeps them.
+    channels are as good as any, and the solve keeps them. ``exclude``: the solve's
+    ``(H, W)`` pixels never sampled, left out of what decides it too.
     """
     if policy not in ("auto", "safe") or stack.count < 2:
         return None
     noise = fit_noise(stack.codes, stack.exposures, response,
-                      encoding=noise_encoding(stack.files, stack.code_max))
-    grid = noise_grid(stack.codes, MIXING_GRID_LIMIT)
-    limits = saturation_limits(stack.codes, response, noise, grid)
-    if policy == "auto":
-        interior = clip_interior(stack.codes, limits, grid=grid)
-        if channel_mixing(grid, response, stack.exposures, limits, interior) <= MIXING_SHIFT:
-            return None
+                      encoding=noise_encoding(stack.files, stack.code_max), exclude=exclude)
+    decided = clip_policy(policy, stack.codes, response, noise, stack.exposures,
+                          exclude=exclude)
+    if policy == "auto" and not decided.neutral:
+        return None
+    limits = decided.limits
     X = np.exp(response.log_inverse)
     times = np.asarray(stack.exposures, dtype=np.float64)
     reach = np.full((stack.count, X.shape[1]), X.shape[0], dtype=np.int64)
