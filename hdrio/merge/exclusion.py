@@ -84,8 +84,7 @@ def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraR
     """
     keep = pixel_keep(excluded, motion_keep, cell)
     terms, estimates = merge_tables(response, exposures, "Debevec1997", domain, weights)
-    remerge_masked(codes, keep, 1, terms, estimates, policy, domain == "log", radiance,
-                   skip_dropped=True)
+    remerge_masked(codes, keep, 1, terms, estimates, policy, domain == "log", radiance)
     unseen = excluded.all(axis=0)
     radiance[unseen] = 0.0
     return unseen

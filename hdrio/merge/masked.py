@@ -51,7 +51,7 @@ def _corner(position, size):  # pragma: no cover - compiled
 
 @njit(parallel=True, cache=True, nogil=True)
 def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, out, first,
-             factors, skip):  # pragma: no cover - compiled
+             factors):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
     limits = policy[0]
     height = min(height, first + touched.shape[0] * cell)  # the band's rows
@@ -59,6 +59,7 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
     scaled = factors.shape[1] > 0
     for cy in prange(touched.shape[0]):
         m = np.empty(count)
+        held = np.empty(count)
         dropped = np.empty(count, dtype=np.int64)
         values = np.empty(channels)
         for cx in range(cols):
@@ -72,15 +73,16 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
                         k = keep[j]
                         m[j] = ((1.0 - wy) * ((1.0 - wx) * k[y0, x0] + wx * k[y0, x1])
                                 + wy * ((1.0 - wx) * k[y1, x0] + wx * k[y1, x1]))
+                        held[j] = m[j]
                         if scaled:
                             m[j] *= factors[j, cy, cx]
                     for j in range(count):
-                        # The clip test reads the next shorter bracket, or (``skip``)
-                        # the next one kept here: one masked out says nothing of it.
+                        # The clip test reads the next shorter bracket kept here: one
+                        # masked out or moving says nothing of the pixel.
                         k = max(j - 1, 0)
-                        while skip and k > 0 and m[k] < 0.5:
+                        while k > 0 and m[k] < 0.5:
                             k -= 1
-                        if skip and j > 0 and m[k] < 0.5 and policy[2] == 2:
+                        if j > 0 and m[k] < 0.5 and policy[2] == 2:
                             dropped[j] = 0  # no shorter bracket kept: nothing to test
                         else:
                             dropped[j] = dropped_channels_against(
@@ -96,9 +98,14 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
                             # A code at its limit has no term; a channel the policy
                             # drops none either, whatever its code.
                             term = terms[j, c, z] * (0.0 if gone else 1.0)
-                            reset = 1.0 - m[j] * saturated
+                            # A clip resets as far as the bracket is kept (a resampled
+                            # bracket's clip is the scene's, a mover's says nothing);
+                            # the longer brackets above a kept clip are no fallback.
+                            reset = 1.0 - held[j] * saturated
                             numerator = numerator * reset + m[j] * term.real
                             denominator = denominator * reset + m[j] * term.imag
+                            if saturated and held[j] >= 0.5:
+                                best = -1
                             if not saturated and (best < 0 or m[j] > m[best]):
                                 best = j
                         if (denominator <= 0.0 and best < 0) or (saturated and m[0] >= 0.5):
@@ -123,7 +130,7 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
 def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.ndarray,
                    estimates: np.ndarray, policy: ClipPolicy, log_domain: bool,
                    radiance: np.ndarray, *, first_row: int = 0, rows: int | None = None,
-                   factors: np.ndarray | None = None, skip_dropped: bool = False) -> int:
+                   factors: np.ndarray | None = None) -> int:
     """Re-merge, in place in ``radiance`` ``(H, W, C)`` float32, the pixels where a keep
     weight is below 1; returns how many cells were re-merged.
 
@@ -146,13 +153,12 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         of ``cell``; all rows by default) are re-merged. ``factors`` ``(P, cell rows of
         the band, cols)`` multiply the keep weights per cell, not interpolated
         (:mod:`hdrio.align.resampling`); the cells where one is below 1 are re-merged too.
-    skip_dropped
-        The clip test (:mod:`hdrio.merge.cliptest`) reads the next shorter bracket kept
-        at the pixel (keep weight 0.5 or more) rather than the next shorter one: for
-        observations excluded by the user (``--mask``, ``--exclude-color``), whose codes
-        say nothing of the pixel. Deghosting's drops are not skipped: at a clip's edge a
-        partly clipped reference can make the brackets below it look moving, and the
-        test must still see them.
+
+    The clip test (:mod:`hdrio.merge.cliptest`) reads, for each bracket, the next shorter
+    one whose keep weight (before ``factors``) is 0.5 or more: the codes of a bracket
+    masked out (``--mask``, ``--exclude-color``) or dropped as a mover say nothing of the
+    pixel. A bracket only down-weighted for its resampling error is still read: it saw
+    the same scene, a clip there is the scene's.
     """
     import scipy.ndimage
     rows = codes.shape[1] - first_row if rows is None else rows
@@ -177,5 +183,5 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
     _remerge(codes, np.ascontiguousarray(
         keep, keep.dtype if keep.dtype == np.float32 else np.float64), touched, cell,
              terms, np.ascontiguousarray(estimates, np.float64), arguments, log_domain,
-             radiance, first_row, np.ascontiguousarray(factors, np.float32), skip_dropped)
+             radiance, first_row, np.ascontiguousarray(factors, np.float32))
     return int(np.count_nonzero(touched))
