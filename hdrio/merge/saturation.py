@@ -41,7 +41,7 @@ neighbours' colour instead.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 
 import numpy as np
 
@@ -115,6 +115,14 @@ class ClipPolicy:
     mixing: float | None = None
     dropped: float | None = None
 
+    def __eq__(self, other: object) -> bool:
+        """The same decisions and tables (the arrays compared by value)."""
+        if not isinstance(other, ClipPolicy):
+            return NotImplemented
+        return _same(self, other)
+
+    __hash__ = None  # arrays inside
+
     @classmethod
     def at_top(cls, code_max: int, channels: int, rule: str = "channel") -> ClipPolicy:
         """``rule`` at the top code (the tutorial's ``pixel``, and ``channel``)."""
@@ -158,6 +166,16 @@ class ClipPolicy:
         return (limits, gates, np.int64(RULES[self.rule]),
                 bool(self.neutral), empty if tables is None else tables.estimates,
                 empty if tables is None else tables.variances, thresholds)
+
+
+def _same(a, b) -> bool:
+    """Whether ``a`` and ``b`` hold the same values: dataclasses field by field, arrays
+    element by element."""
+    if is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.array_equal(a, b)
+    return a == b
 
 
 def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
