@@ -26,15 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import (
-    CLIP_TOP,
-    NoiseModel,
-    near_clipping,
-    observation_variance,
-    robust_spread,
-    supported_range,
-    usable_codes,
-)
+from hdrio.radiometry.noise import NoiseModel, observation_variance, supported_range, usable_codes
+from hdrio.radiometry.noise_fit import CLIP_TOP, near_clipping, robust_spread
 
 DECILES = 10
 BOUNDS = (0.8, 1.25)
@@ -55,13 +48,13 @@ def disagreement_deciles(codes: np.ndarray, exposures, response: CameraResponse,
     For every pixel (every ``step``-th each way) where bracket ``j`` and ``j + 1`` both
     read a code the merge uses (:func:`hdrio.radiometry.noise.usable_codes`, inside the
     solve's supported range, below the saturation ``limits``), not next to a clipped
-    channel in either (:func:`hdrio.radiometry.noise.near_clipping`, as the fit) and not
+    channel in either (:func:`hdrio.radiometry.noise_fit.near_clipping`, as the fit) and not
     ``exclude`` (``(H, W)`` bool): the disagreement of the two estimates ``x = f^-1(z) /
     dt`` in units of its predicted standard deviation, ``u = (x_{j+1} - x_j) / sqrt(var_j
     + var_{j+1})`` (:func:`hdrio.radiometry.noise.observation_variance` with
     ``disagreement``). The pairs of every bracket pair are pooled and split into deciles
     of brightness (the mean of the two estimates); in each the measured spread is the
-    robust standard deviation of ``u`` about 0 (:func:`hdrio.radiometry.noise.robust_spread`:
+    robust standard deviation of ``u`` about 0 (:func:`hdrio.radiometry.noise_fit.robust_spread`:
     a constant offset between two brackets is disagreement too). A model that predicts
     the disagreement gives 1; 2 means the brackets disagree twice as much as it says.
     """

@@ -533,7 +533,8 @@ def test_cell_factors_match_their_formula(truth_scene):
     from hdrio.align.deghost import comparametric_correction, consistency_variance
     from hdrio.align.registration import linear_tables
     from hdrio.align.resampling import ResamplingTables, cell_factors
-    from hdrio.radiometry.noise import fit_noise, observation_variance
+    from hdrio.radiometry.noise import observation_variance
+    from hdrio.radiometry.noise_fit import fit_noise
 
     moving, warps, reference = _moving(truth_scene, 1)
     stack = align_stack(moving, Alignment(reference, np.stack(warps), "euclidean",

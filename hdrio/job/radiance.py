@@ -28,7 +28,8 @@ from hdrio.merge.saturation import policy_limits
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, fit_noise, observation_variance
+from hdrio.radiometry.noise import NoiseModel, observation_variance
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.radiometry.tables import estimate_tables, merge_tables
 from hdrio.stack import ExposureStack
 

@@ -41,7 +41,8 @@ from __future__ import annotations
 import numpy as np
 
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, noise_grid
+from hdrio.radiometry.noise import NoiseModel
+from hdrio.radiometry.noise_fit import noise_grid
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")
 
