@@ -192,8 +192,17 @@ def measure(name: str, stack, options) -> dict:
         result.stack.codes, result.stack.channel_exposures, result.response, result.noise,
         result.statistics.limits, exclude)
     dark = dark_ratios(result, exclude)
+    # The same outside the moving regions: there the merge keeps the view of one bracket
+    # (the consistent snapshot), not necessarily the longest unclipped one's.
+    deghosting = result.motion.deghosting if result.motion is not None else None
+    if deghosting is not None and deghosting.fraction > 0:
+        moved = deghosting.motion_mask(*result.radiance.shape[:2]) > 0
+        still = dark_ratios(result, moved if exclude is None else exclude | moved)
+    else:
+        still = dark
     return {"stack": name, "ratios": ratios.tolist(), "pairs": counted.tolist(),
             "noise": result.noise.attributes(), "dark": dark.tolist(),
+            "dark_still": still.tolist(),
             "deciles_within": bool(np.all((ratios >= BOUNDS[0]) & (ratios <= BOUNDS[1]))),
             "dark_within": dark_within(dark)}
 
@@ -219,11 +228,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nmerge / the longest unclipped bracket's estimate where it reads codes "
           f"{DARK_CODES[0]}-{DARK_CODES[1]} (median within {DARK_MEDIAN:.0%} of 1, "
           f"5th-95th within {DARK_SPREAD[0]}-{DARK_SPREAD[1]})")
-    print(f"{'stack':28s} {'channel':>7s} {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}")
+    print(f"{'stack':28s} {'channel':>7s} {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}"
+          f"   outside moving regions: {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}")
     for row in rows:
-        for c, (pixels, p5, median, p95) in enumerate(row["dark"]):
+        for c, ((pixels, p5, median, p95), still) in enumerate(zip(row["dark"],
+                                                                  row["dark_still"])):
             print(f"{row['stack']:28s} {c:7d} {int(pixels):8d} {p5:6.3f} {median:7.3f} "
-                  f"{p95:6.3f}")
+                  f"{p95:6.3f}   {'':23s}{int(still[0]):8d} {still[1]:6.3f} "
+                  f"{still[2]:7.3f} {still[3]:6.3f}")
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=2))
