@@ -54,7 +54,7 @@ from hdrio.io.staging import budget_bytes, codes_buffer, release
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_stack
 from hdrio.parallel import threads
-from hdrio.radiometry.noise import fit_noise
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.stack import ExposureStack
 
 

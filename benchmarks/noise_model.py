@@ -26,15 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import (
-    CLIP_TOP,
-    NoiseModel,
-    near_clipping,
-    observation_variance,
-    robust_spread,
-    supported_range,
-    usable_codes,
-)
+from hdrio.radiometry.noise import NoiseModel, observation_variance, supported_range, usable_codes
+from hdrio.radiometry.noise_fit import CLIP_TOP, near_clipping, robust_spread
 
 DECILES = 10
 BOUNDS = (0.8, 1.25)
@@ -55,13 +48,13 @@ def disagreement_deciles(codes: np.ndarray, exposures, response: CameraResponse,
     For every pixel (every ``step``-th each way) where bracket ``j`` and ``j + 1`` both
     read a code the merge uses (:func:`hdrio.radiometry.noise.usable_codes`, inside the
     solve's supported range, below the saturation ``limits``), not next to a clipped
-    channel in either (:func:`hdrio.radiometry.noise.near_clipping`, as the fit) and not
+    channel in either (:func:`hdrio.radiometry.noise_fit.near_clipping`, as the fit) and not
     ``exclude`` (``(H, W)`` bool): the disagreement of the two estimates ``x = f^-1(z) /
     dt`` in units of its predicted standard deviation, ``u = (x_{j+1} - x_j) / sqrt(var_j
     + var_{j+1})`` (:func:`hdrio.radiometry.noise.observation_variance` with
     ``disagreement``). The pairs of every bracket pair are pooled and split into deciles
     of brightness (the mean of the two estimates); in each the measured spread is the
-    robust standard deviation of ``u`` about 0 (:func:`hdrio.radiometry.noise.robust_spread`:
+    robust standard deviation of ``u`` about 0 (:func:`hdrio.radiometry.noise_fit.robust_spread`:
     a constant offset between two brackets is disagreement too). A model that predicts
     the disagreement gives 1; 2 means the brackets disagree twice as much as it says.
     """
@@ -201,8 +194,17 @@ def measure(name: str, stack, options) -> dict:
         result.stack.codes, result.stack.channel_exposures, result.response, result.noise,
         result.statistics.limits, exclude)
     dark = dark_ratios(result, exclude)
+    # The same outside the moving regions: there the merge keeps the view of one bracket
+    # (the consistent snapshot), not necessarily the longest unclipped one's.
+    deghosting = result.motion.deghosting if result.motion is not None else None
+    if deghosting is not None and deghosting.fraction > 0:
+        moved = deghosting.motion_mask(*result.radiance.shape[:2]) > 0
+        still = dark_ratios(result, moved if exclude is None else exclude | moved)
+    else:
+        still = dark
     return {"stack": name, "ratios": ratios.tolist(), "pairs": counted.tolist(),
             "noise": result.noise.attributes(), "dark": dark.tolist(),
+            "dark_still": still.tolist(),
             "deciles_within": bool(np.all((ratios >= BOUNDS[0]) & (ratios <= BOUNDS[1]))),
             "dark_within": dark_within(dark)}
 
@@ -228,11 +230,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nmerge / the longest unclipped bracket's estimate where it reads codes "
           f"{DARK_CODES[0]}-{DARK_CODES[1]} (median within {DARK_MEDIAN:.0%} of 1, "
           f"5th-95th within {DARK_SPREAD[0]}-{DARK_SPREAD[1]})")
-    print(f"{'stack':28s} {'channel':>7s} {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}")
+    print(f"{'stack':28s} {'channel':>7s} {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}"
+          f"   outside moving regions: {'pixels':>8s} {'p5':>6s} {'median':>7s} {'p95':>6s}")
     for row in rows:
-        for c, (pixels, p5, median, p95) in enumerate(row["dark"]):
+        for c, ((pixels, p5, median, p95), still) in enumerate(zip(row["dark"],
+                                                                  row["dark_still"])):
             print(f"{row['stack']:28s} {c:7d} {int(pixels):8d} {p5:6.3f} {median:7.3f} "
-                  f"{p95:6.3f}")
+                  f"{p95:6.3f}   {'':23s}{int(still[0]):8d} {still[1]:6.3f} "
+                  f"{still[2]:7.3f} {still[3]:6.3f}")
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=2))

@@ -37,7 +37,7 @@ def size_numba_threads() -> None:
 
 
 STAGES: dict[str, tuple[str, ...]] = {
-    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise:_clipped_near"),
+    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise_fit:_clipped_near"),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.consistency:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }

@@ -537,8 +537,9 @@ def test_cell_factors_match_their_formula(truth_scene):
     1; a band of cell rows gives the same factors as the whole."""
     from hdrio.align.deghost import comparametric_correction, consistency_variance
     from hdrio.align.registration import linear_tables
-    from hdrio.align.resampling import cell_factors
-    from hdrio.radiometry.noise import fit_noise, observation_variance
+    from hdrio.align.resampling import ResamplingTables, cell_factors
+    from hdrio.radiometry.noise import observation_variance
+    from hdrio.radiometry.noise_fit import fit_noise
 
     moving, warps, reference = _moving(truth_scene, 1)
     stack = align_stack(moving, Alignment(reference, np.stack(warps), "euclidean",
@@ -551,7 +552,8 @@ def test_cell_factors_match_their_formula(truth_scene):
     variance = observation_variance(response, stack.exposures, noise)
     limits = np.full(3, stack.code_max - 5)
     scales = np.full(3, 1.3)
-    tables = (stack.codes, reference, estimates, variance, allowed, limits, scales)
+    tables = (stack.codes, reference, ResamplingTables(estimates, variance, allowed), limits,
+              scales)
     todo = np.ones((3, H // 8, W // 8), bool)
     factors = cell_factors(*tables, todo, 8)
     assert np.all(factors[reference] == 1.0)

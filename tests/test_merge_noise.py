@@ -25,11 +25,11 @@ from hdrio.radiometry.noise import (
     QUANTISATION,
     NoiseModel,
     encoding_floors,
-    fit_noise,
     noise_encoding,
     observation_variance,
     usable_codes,
 )
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.stack import ExposureStack
 from hdrio.tools.synthetic import (
     DEFAULT_READ_NOISE,
@@ -286,7 +286,7 @@ def test_nonnegative_least_squares_matches_scipy():
     exact up to the rounding of a 3x3 solve), and no negative coefficient."""
     from scipy.optimize import nnls
 
-    from hdrio.radiometry.noise import nonnegative_least_squares
+    from hdrio.radiometry.noise_fit import nonnegative_least_squares
 
     rng = np.random.default_rng(0)
     for trial in range(500):

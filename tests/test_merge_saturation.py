@@ -128,7 +128,8 @@ def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
     from benchmarks.truth.stacks import exposure_ladder, jpeg_round_trip
     from hdrio.merge import clipping as saturation
     from hdrio.merge.saturation import clip_policy
-    from hdrio.radiometry.noise import fit_noise, noise_encoding, noise_grid
+    from hdrio.radiometry.noise import noise_encoding
+    from hdrio.radiometry.noise_fit import fit_noise, noise_grid
     from hdrio.tools.synthetic import render_brackets
 
     scene = _scene(name)

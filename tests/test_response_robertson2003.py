@@ -47,8 +47,9 @@ def test_the_refined_response_stays_near_the_truth(curve_name, shared_data):
 def test_it_takes_the_toe_heavy_curve_closer_than_debevec(shared_data):
     """The truth harness's core stack Desk / DoRF 200 (7 frames 2 EV apart): Debevec's
     smoothness term leaves the strong toe 0.046 stop RMS off; the refinement brings it
-    to 0.035 (measured; asserted: at least 15 % closer), and the merge's median error
-    from 2.45 % to 1.60 %. (It is not the default: over the harness it is no better,
+    to 0.0397 (measured with the noise model of issue 28, whose terms are never zero
+    and which weights the toe's codes less; 0.035 with the earlier model), asserted: at
+    least 10 % closer. (It is not the default: over the harness it is no better,
     docs/accuracy.md.)"""
     shared_data("openexr_scenes"), shared_data("crf_database")
     from benchmarks.truth.curves import load_curve
@@ -64,7 +65,7 @@ def test_it_takes_the_toe_heavy_curve_closer_than_debevec(shared_data):
                                  curve, 255)[0]
     refined = response_rms_stops(RESPONSE_METHODS["Robertson2003"](stack).log_inverse,
                                  curve, 255)[0]
-    assert refined < 0.85 * debevec, (refined, debevec)
+    assert refined < 0.9 * debevec, (refined, debevec)
 
 
 def test_cli_records_the_method(brackets, tmp_path, capsys):

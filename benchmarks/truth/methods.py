@@ -22,7 +22,8 @@ from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_stack
 from hdrio.merge.methods import MERGE_METHODS
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import QUANTISATION, NoiseModel, fit_noise, noise_encoding
+from hdrio.radiometry.noise import QUANTISATION, NoiseModel, noise_encoding
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.stack import ExposureStack
 
 

@@ -33,7 +33,7 @@ for ghost-free HDR reconstruction. ACM Transactions on Graphics 32(6), 201.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -128,20 +128,26 @@ def _fine_cells(suspect: np.ndarray, rows: int, cols: int, cell: int, size: int
             | suspect[first_r][:, last_c] | suspect[last_r][:, first_c])
 
 
-def _clipped_fraction(codes: np.ndarray, bracket: int, region: np.ndarray, cell: int,
-                      high: int) -> float:
-    """The fraction of ``region``'s samples (cells, every :data:`STRIDE`-th pixel) where
-    ``bracket`` has some channel above ``high`` (saturated)."""
-    rows, cols = np.nonzero(region)
-    top, left = rows.min(), cols.min()
+def _clipped_cells(codes: np.ndarray, bracket: int, cell: int, high: int, rows: int,
+                   cols: int) -> np.ndarray:
+    """``(rows, cols)`` counts, per cell, of the samples (every :data:`STRIDE`-th pixel)
+    where ``bracket`` has some channel above ``high`` (saturated); with ``bracket``
+    ``None``, of the samples. A region's clipped fraction is the first summed over its
+    cells over the second (the cells' sample grids line up, ``cell`` being a multiple of
+    the stride)."""
     half = STRIDE // 2
-    patch = codes[bracket, top * cell + half:(rows.max() + 1) * cell:STRIDE,
-                  left * cell + half:(cols.max() + 1) * cell:STRIDE]
-    clipped = np.any(patch > high, axis=-1)
     per = cell // STRIDE
-    inside = np.repeat(np.repeat(region[top:rows.max() + 1, left:cols.max() + 1], per, 0),
-                       per, 1)[:clipped.shape[0], :clipped.shape[1]]
-    return float(np.mean(clipped[inside])) if inside.any() else 0.0
+    view = codes[0 if bracket is None else bracket, half::STRIDE, half::STRIDE]
+    if bracket is None:
+        grid = np.ones(view.shape[:2], bool)
+    else:
+        grid = view[..., 0]
+        for c in range(1, view.shape[-1]):  # by channel: 25x faster than any(axis=-1)
+            grid = np.maximum(grid, view[..., c])
+        grid = grid > high
+    padded = np.zeros((rows * per, cols * per), bool)
+    padded[:grid.shape[0], :grid.shape[1]] = grid
+    return padded.reshape(rows, per, cols, per).sum(axis=(1, 3), dtype=np.int32)
 
 
 def _excluded_cells(excluded: np.ndarray, cell: int, rows: int, cols: int) -> np.ndarray:
@@ -152,12 +158,50 @@ def _excluded_cells(excluded: np.ndarray, cell: int, rows: int, cols: int) -> np
     return padded.reshape(count, rows, cell, cols, cell).any(axis=(2, 4))
 
 
-def _source(codes, tables: Tables, reference: int, region: np.ndarray, flagged: np.ndarray,
-            judged: np.ndarray, limits: np.ndarray, *, cell: int, resampled: bool
-            ) -> tuple[int, np.ndarray]:
+@dataclass
+class _Candidates:
+    """What :func:`_source` reads of every moving region, computed once for all of them
+    when first needed: each bracket's saturated samples per cell
+    (:func:`_clipped_cells`) and its test against the others over all the moving cells
+    (a cell's tallies depend on its own pixels only, so each region reads its cells of
+    the same arrays; a test per region and bracket took 24 of 30 s on a still 9 x 24 MP
+    JPEG stack with 209 small regions)."""
+
+    codes: np.ndarray
+    tables: Tables
+    moving: np.ndarray
+    cell: int
+    resampled: bool
+    clipped: dict = field(default_factory=dict)
+    tests: dict = field(default_factory=dict)
+
+    def clipped_fraction(self, bracket: int, box: tuple[slice, slice],
+                         region: np.ndarray) -> float:
+        """The fraction of ``region``'s samples (its cells within ``box``) where
+        ``bracket`` is saturated."""
+        for j in (None, bracket):  # None: the samples
+            if j not in self.clipped:
+                high = int(self.tables.variance.shape[2]) - 2  # Z_max - 1: saturated above
+                self.clipped[j] = _clipped_cells(self.codes, j, self.cell, high,
+                                                 *self.moving.shape)
+        total = int(self.clipped[None][box][region].sum())
+        return float(self.clipped[bracket][box][region].sum()) / total if total else 0.0
+
+    def test(self, bracket: int):
+        """:func:`cell_disagreement` against ``bracket`` over the moving cells."""
+        if bracket not in self.tests:
+            self.tests[bracket] = cell_disagreement(self.codes, self.tables, bracket,
+                                                    self.cell, STRIDE, self.moving,
+                                                    self.resampled)
+        return self.tests[bracket]
+
+
+def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
+            region: np.ndarray, flagged: np.ndarray, judged: np.ndarray,
+            limits: np.ndarray) -> tuple[int, np.ndarray]:
     """The bracket whose view ``region`` keeps, and ``(P, rows, cols)`` the cells where
     each bracket disagrees with it (``flagged``: with the reference; ``judged``: cells
-    with enough samples to tell).
+    with enough samples to tell), all within the region's bounding ``box`` of cells.
 
     The view the most brackets agree with in the region's moving cells (a moving object
     is at a different place in each bracket: at any one place, most show what is behind
@@ -166,23 +210,21 @@ def _source(codes, tables: Tables, reference: int, region: np.ndarray, flagged: 
     saturated there is never a source; under a clipped reference only brackets consistent
     with its bound (the radiance is at least its last usable code's) can be: a dark
     object that only a short bracket shows there is a ghost."""
-    count = codes.shape[0]
+    count = candidates.codes.shape[0]
     core = region & flagged.any(axis=0)  # the cells some bracket was found moving in
     others = [j for j in range(count) if j != reference]
     support = sum(int(np.count_nonzero(judged[j] & ~flagged[j] & core)) for j in others)
-    high = int(tables.variance.shape[2]) - 2  # Z_max - 1: saturated above
-    clipped = _clipped_fraction(codes, reference, region, cell, high) > CLIPPED_SOURCE
+    clipped = candidates.clipped_fraction(reference, box, region) > CLIPPED_SOURCE
     if not clipped and support >= 0.5 * sum(int(np.count_nonzero(judged[j] & core))
                                             for j in others):
         return reference, flagged
     best = (reference, flagged, -1 if clipped else support)
     for k in others:
         if (clipped and np.count_nonzero(flagged[k] & core) > 0.5 * np.count_nonzero(core)
-                or _clipped_fraction(codes, k, region, cell, high) > CLIPPED_SOURCE):
+                or candidates.clipped_fraction(k, box, region) > CLIPPED_SOURCE):
             continue
-        mean, counts, _, far = cell_disagreement(codes, tables, k, cell, STRIDE, region,
-                                                 resampled)
-        told = counts >= MIN_SAMPLES
+        mean, counts, _, far = (a[(slice(None), *box)] for a in candidates.test(k))
+        told = (counts >= MIN_SAMPLES) & region
         against = (mean > limits[:, None, None]) & (far > FAR) & told
         against[k] = False
         agree = sum(int(np.count_nonzero(told[j] & ~against[j] & core))
@@ -268,16 +310,18 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     moving = scipy.ndimage.binary_dilation(flagged.any(axis=0), np.ones((3, 3), bool))
     if not moving.any():
         return Deghosting(keep, cell, reference, 0.0)
-    labels, regions = scipy.ndimage.label(moving, np.ones((3, 3), bool))
+    labels, _ = scipy.ndimage.label(moving, np.ones((3, 3), bool))
     drop = np.zeros((count, rows, cols), bool)
     sources = np.full((rows, cols), -1, np.int8)
-    for label in range(1, regions + 1):
-        region = labels == label
-        source, against = _source(codes, tables, reference, region, flagged, judged, limits,
-                                  cell=cell, resampled=resampled)
-        drop |= against & region
-        drop[source][region] = False
-        sources[region] = source
+    candidates = _Candidates(codes, tables, moving, cell, resampled)
+    for label, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
+        region = labels[box] == label
+        every = (slice(None), *box)
+        source, against = _source(candidates, reference, box, region, flagged[every],
+                                  judged[every], limits)
+        drop[every] |= against & region
+        drop[source][box][region] = False
+        sources[box][region] = source
     dropped = np.zeros((rows, cols), bool)
     for j in range(count):
         if not drop[j].any():

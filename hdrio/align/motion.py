@@ -30,7 +30,8 @@ from hdrio.align.resolve import sharp_edges
 from hdrio.align.warp import coverage, seen_elsewhere
 from hdrio.errors import HdrioError
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, fit_noise
+from hdrio.radiometry.noise import NoiseModel
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.stack import ExposureStack
 
 

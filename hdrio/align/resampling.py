@@ -42,6 +42,7 @@ of cell rows so that memory stays bounded.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -84,9 +85,29 @@ against every cell measured: these gates raise the p99 error by 0.2-0.7 %; with 
 here, by 2.0-2.2 %."""
 
 
-def cell_factors(codes: np.ndarray, reference: int, estimates: np.ndarray,
-                 noise: np.ndarray, allowed: np.ndarray, limits, scales, todo: np.ndarray,
-                 cell: int, first: int = 0, code_max: int | None = None) -> np.ndarray:
+@dataclass(frozen=True)
+class ResamplingTables:
+    """The ``(P, C, levels)`` tables the resampling weights read.
+
+    Attributes
+    ----------
+    estimates
+        ``x(z)``, relative radiance (with the response's systematic error divided out:
+        :func:`hdrio.align.comparametric.comparametric_correction`).
+    noise
+        ``var(x | z)`` of the noise model, relative radiance squared.
+    allowed
+        The variance the deghosting test allows (``inf`` where a code says nothing).
+    """
+
+    estimates: np.ndarray
+    noise: np.ndarray
+    allowed: np.ndarray
+
+
+def cell_factors(codes: np.ndarray, reference: int, tables: ResamplingTables, limits,
+                 scales, todo: np.ndarray, cell: int, *, first: int = 0,
+                 code_max: int | None = None) -> np.ndarray:
     """``var_noise / (var_noise + var_resample)`` of every warped bracket per cell (module
     docstring), ``(P, rows, cols)`` float32 for the cell rows ``first .. first + rows -
     1``; 1 for ``reference``, where a bracket is smooth or ``todo`` is false, and where the
@@ -98,10 +119,9 @@ def cell_factors(codes: np.ndarray, reference: int, estimates: np.ndarray,
         ``(P, H, W, C)`` codes, every bracket but ``reference`` warped onto it.
     reference
         The bracket the others were aligned to (not warped).
-    estimates, noise, allowed
-        ``(P, C, levels)``: ``x(z)``, relative radiance; ``var(x | z)`` of the noise
-        model; the variance the deghosting test allows (``inf`` where a code says
-        nothing), relative radiance squared.
+    tables
+        The estimates, their noise and the variance the test allows
+        (:class:`ResamplingTables`).
     limits
         ``(C,)`` the first code the merge's saturation policy drops per channel.
     scales
@@ -115,10 +135,11 @@ def cell_factors(codes: np.ndarray, reference: int, estimates: np.ndarray,
         The codes' largest value (for :data:`EDGE`; the tables' last code by default).
     """
     count, rows, cols = todo.shape
-    code_max = estimates.shape[-1] - 1 if code_max is None else code_max
+    code_max = tables.estimates.shape[-1] - 1 if code_max is None else code_max
     out = np.ones((count, rows, cols), np.float32)
     on_threads(_cell_factors, rows, codes, reference,
-               *(np.ascontiguousarray(t, np.float64) for t in (estimates, noise, allowed)),
+               *(np.ascontiguousarray(t, np.float64)
+                 for t in (tables.estimates, tables.noise, tables.allowed)),
                np.ascontiguousarray(limits, np.int64),
                np.ascontiguousarray(scales, np.float64), np.ascontiguousarray(todo, np.bool_),
                cell, first, float(4.0 * EDGE * code_max), out)
@@ -234,17 +255,17 @@ def disagreement_scale(codes: np.ndarray, reference: np.ndarray, estimates: np.n
     return max(1.0, float(np.median(ratios))) if ratios.size else 1.0
 
 
-def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarray | None,
-                      cell: int, reference: int, estimates: np.ndarray, noise: np.ndarray,
-                      allowed: np.ndarray, weights: np.ndarray, remerge,
-                      radiance: np.ndarray) -> None:
+def remerge_resampled(codes: np.ndarray, tables: ResamplingTables, remerge,
+                      radiance: np.ndarray, *, reference: int, cell: int,
+                      cells: np.ndarray | None, limits, code_max: int,
+                      weights: np.ndarray) -> None:
     """Re-merge ``radiance`` ``(H, W, C)`` in bands of cell rows with every bracket's keep
     weight on ``cells`` (or 1) times, but for the ``reference`` (never warped), its
     :func:`cell_factors` in the cells where it can carry :data:`hdrio.align.shares.SHARE`
     of the merge's ``weights`` (``(P, C, levels)``, :func:`hdrio.align.shares.weighty_cells`).
 
-    ``limits``: the merge's saturation limits, ``(C,)`` codes; ``estimates``, ``noise``,
-    ``allowed``: ``(P, C, levels)`` tables (see :func:`cell_factors`). ``remerge``
+    ``limits``: the merge's saturation limits, ``(C,)`` codes; ``tables``: see
+    :class:`ResamplingTables`. ``remerge``
     (``codes, keep, radiance, first_row, rows, factors``) re-merges one band
     (:func:`hdrio.merge.masked.remerge_masked` with the merge's tables, its cells of
     ``cell`` pixels). Staged brackets' pages are given back after each band.
@@ -255,20 +276,21 @@ def remerge_resampled(codes: np.ndarray, code_max: int, limits, cells: np.ndarra
     rows, cols = -(-height // cell), -(-width // cell)
     if cells is None:
         cells = np.ones((count, rows, cols), np.float32)
-    tables = range_tables(weights, limits)
+    ranges = range_tables(weights, limits)
     kept = np.stack([scipy.ndimage.minimum_filter(k, 3, mode="nearest") for k in cells])
     step = max(1, int(np.sqrt(height * width / SAMPLES)))
     grid = np.ascontiguousarray(codes[:, step // 2::step, step // 2::step]).reshape(
         count, -1, channels)
-    scales = [disagreement_scale(grid[j], grid[reference], estimates[[j, reference]],
-                                 allowed[[j, reference]], limits) for j in range(count)]
+    scales = [disagreement_scale(grid[j], grid[reference], tables.estimates[[j, reference]],
+                                 tables.allowed[[j, reference]], limits)
+              for j in range(count)]
     band = -(-rows // BANDS)
     for top in range(0, rows, band):
         bottom = min(rows, top + band)
-        todo = weighty_cells(codes, cell, top, bottom, kept[:, top:bottom], tables, limits,
-                             shares.SHARE, int(SPREAD * code_max))
-        factors = cell_factors(codes, reference, estimates, noise, allowed, limits, scales,
-                               todo, cell, top, code_max)
+        todo = weighty_cells(codes, cell, top, bottom, kept[:, top:bottom], ranges, limits,
+                             share=shares.SHARE, spread=int(SPREAD * code_max))
+        factors = cell_factors(codes, reference, tables, limits, scales, todo, cell,
+                               first=top, code_max=code_max)
         remerge(codes, cells, radiance, top * cell, min(height, bottom * cell) - top * cell,
                 factors)
         release(codes, None, 0, min(height, bottom * cell))

@@ -43,7 +43,7 @@ def range_tables(weights: np.ndarray, limits) -> tuple[np.ndarray, np.ndarray, i
 
 
 def weighty_cells(codes: np.ndarray, cell: int, first: int, last: int, kept: np.ndarray,
-                  tables, limits, share: float = SHARE, spread: int = 0) -> np.ndarray:
+                  tables, limits, *, share: float = SHARE, spread: int = 0) -> np.ndarray:
     """``(P, last - first, cols)`` bool: the cells (of ``cell`` pixels, rows ``first ..
     last - 1``) where a bracket of ``codes`` ``(P, H, W, C)`` can carry ``share`` of the
     merge's weight in some channel, from the range of its codes there (on every

@@ -175,7 +175,8 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            help=f"register the brackets to {REFERENCE_RULE}: auto (measure; warp only if "
                 "some bracket moved more than 0.1 px; a bracket too clipped to register "
                 "is merged only where no registered one sees the scene, and named), off, "
-                "or a model to warp with (default auto)"),
+                "or a model to warp with: translation, euclidean or homography "
+                "(default auto)"),
     Option("--deghost", ("MODE",), "deghost", choice(*DEGHOST_MODES), example=("auto",),
            help="drop observations that disagree with the reference bracket (moving "
                 "people, leaves): auto or off (default auto)"),

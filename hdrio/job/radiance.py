@@ -18,7 +18,7 @@ from hdrio.align.comparametric import comparametric_correction, consistency_vari
 from hdrio.align.deghost import CELL
 from hdrio.align.motion import Motion
 from hdrio.align.registration import linear_tables
-from hdrio.align.resampling import remerge_resampled
+from hdrio.align.resampling import ResamplingTables, remerge_resampled
 from hdrio.job.plan import MergePlan
 from hdrio.job.result import Progress
 from hdrio.merge.exclusion import masked_statistics, remerge_excluded
@@ -28,7 +28,8 @@ from hdrio.merge.saturation import clip_policy
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, fit_noise, observation_variance
+from hdrio.radiometry.noise import NoiseModel, observation_variance
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.radiometry.tables import estimate_tables, merge_tables
 from hdrio.stack import ExposureStack
 
@@ -119,12 +120,13 @@ def remerge_motion(stack: ExposureStack, response: CameraResponse, merged: Merge
         noise = fit_noise(stack.codes, stack.exposures, response)
     reference = motion.alignment.reference
     allowed = consistency_variance(response, stack.exposures, noise)
-    remerge_resampled(stack.codes, stack.code_max, statistics.limits, motion.keep, CELL,
-                      reference,
-                      comparametric_correction(stack.codes, linear_tables(
-                          response, stack.exposures), allowed, reference),
-                      observation_variance(response, stack.exposures, noise), allowed,
-                      terms.imag, remerge, merged.radiance)
+    tables = ResamplingTables(
+        comparametric_correction(stack.codes, linear_tables(response, stack.exposures),
+                                 allowed, reference),
+        observation_variance(response, stack.exposures, noise), allowed)
+    remerge_resampled(stack.codes, tables, remerge, merged.radiance, reference=reference,
+                      cell=CELL, cells=motion.keep, limits=statistics.limits,
+                      code_max=stack.code_max, weights=terms.imag)
 
 
 def remerge_stage(stack: ExposureStack, merged_stack: ExposureStack,

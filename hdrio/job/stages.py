@@ -35,7 +35,8 @@ from hdrio.merge.ladder import (
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
 from hdrio.merge.saturation import SolveFilter, solve_filter
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding
+from hdrio.radiometry.noise import NoiseModel, noise_encoding
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.radiometry.saved_response import check_response_fits
 from hdrio.response import RESPONSE_METHODS
 from hdrio.skips import classify

@@ -12,7 +12,8 @@ import numpy as np
 
 from hdrio.merge.cliptest import ClipTables
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, grid_stride, noise_grid
+from hdrio.radiometry.noise import NoiseModel
+from hdrio.radiometry.noise_fit import grid_stride, noise_grid
 
 _PILE_UP = 8.0  # a white level's count is this many times its neighbours' median
 _TOP_FRACTION = 0.75  # white levels are looked for above this fraction of the code range

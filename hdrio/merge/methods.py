@@ -17,7 +17,8 @@ from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.method_registry import MethodRegistry
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.estimators import ESTIMATORS, Estimator
-from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding
+from hdrio.radiometry.noise import NoiseModel, noise_encoding
+from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.stack import ExposureStack
 
 MergeFunction = Callable[..., tuple[np.ndarray, MergeStatistics]]

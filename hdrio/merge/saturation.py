@@ -63,7 +63,8 @@ from hdrio.merge.cliptest import (
     dropped_observations,
 )
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel, fit_noise, noise_encoding, noise_grid
+from hdrio.radiometry.noise import NoiseModel, noise_encoding
+from hdrio.radiometry.noise_fit import fit_noise, noise_grid
 from hdrio.stack import ExposureStack
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")

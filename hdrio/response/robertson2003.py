@@ -76,13 +76,8 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     """
     # Imported here: hdrio.radiometry.noise imports this package's curve module.
     from hdrio.io.staging import candidate_stride
-    from hdrio.radiometry.noise import (
-        fit_noise,
-        noise_encoding,
-        noise_grid,
-        observation_variance,
-        usable_codes,
-    )
+    from hdrio.radiometry.noise import noise_encoding, observation_variance, usable_codes
+    from hdrio.radiometry.noise_fit import fit_noise, noise_grid
 
     start = response_Debevec1997(stack, smoothing, weighting=weighting, sampling=sampling,
                                  samples=samples, exclude=exclude, seed=seed, levels=levels,

@@ -18,7 +18,7 @@ def _compile_merge() -> None:
     """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), and the
     noise fit's look for clipped neighbours."""
     from hdrio.merge.weighted_mean import merge_brackets
-    from hdrio.radiometry.noise import near_clipping
+    from hdrio.radiometry.noise_fit import near_clipping
     from hdrio.stack import ExposureStack
     from hdrio.tools.synthetic import gamma_inverse_response
 

@@ -27,7 +27,7 @@ from hdrio.io.write import write_exr  # noqa: E402
 from hdrio.job.options import MergeOptions  # noqa: E402
 from hdrio.merge import MERGE_METHODS  # noqa: E402
 from hdrio.radiometry.curve import CameraResponse  # noqa: E402
-from hdrio.radiometry.noise import fit_noise  # noqa: E402
+from hdrio.radiometry.noise_fit import fit_noise  # noqa: E402
 from hdrio.tools.synthetic import demo_scene  # noqa: E402
 from plugins.blender.baking import response_to_json  # noqa: E402
 from plugins.blender.warmup import WARMUP  # noqa: E402
