@@ -118,18 +118,22 @@ def clip_tables(response: CameraResponse, exposures, noise: NoiseModel,
 
 
 @njit(inline="always", **INNER)
-def dropped_channels_against(longer, shorter, base, j, k, policy):  # pragma: no cover
+def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, estimates,
+                     variances, threshold):  # pragma: no cover - compiled
     """The channels of bracket ``j``'s observation at the pixel whose channels start at
     ``longer[base]`` that the policy drops besides those at or above their limits, as
     a bit set (bit ``c``: channel ``c``; every bit: the whole observation); ``shorter``
     holds bracket ``k``'s codes at the same place (``k < j``: the bracket it is tested
-    against, the next shorter one kept; read only for ``j >= 1``).
+    against, the next shorter one kept, ``j - 1`` but where that one is masked out;
+    read only for ``j >= 1``).
 
-    ``policy`` is :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`: ``(limits,
-    gates, rule, neutral, estimates, variances, thresholds)``, the thresholds ``(P, C)``
-    the squared disagreement each pair of brackets and channel allows, in variances.
-    """
-    limits, gates, rule, neutral, estimates, variances, threshold = policy
+    The policy's parts are :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`,
+    ``(limits, gates, rule, neutral, estimates, variances, thresholds)``, the
+    thresholds ``(P, C)`` the squared disagreement each pair of brackets and channel
+    allows, in variances. A kernel unpacks that tuple once, outside its loops, and
+    passes the parts: the tuple handed to a function called per pixel costs an atomic
+    reference count per array and call, which the threads then contend for (6 s of a
+    24 MP merge's 7)."""
     channels = limits.size
     whole = (1 << channels) - 1
     clipped = 0
@@ -154,25 +158,16 @@ def dropped_channels_against(longer, shorter, base, j, k, policy):  # pragma: no
     return 0
 
 
-@njit(inline="always", **INNER)
-def dropped_channels(longer, shorter, base, j, policy):  # pragma: no cover - compiled
-    """:func:`dropped_channels_against` the next shorter bracket, ``j - 1``."""
-    return dropped_channels_against(longer, shorter, base, j, max(j - 1, 0), policy)
-
-
-@njit(inline="always", **INNER)
-def dropped_whole(longer, shorter, base, j, policy):  # pragma: no cover - compiled
-    """Whether :func:`dropped_channels` drops the whole observation."""
-    return dropped_channels(longer, shorter, base, j, policy) == (1 << policy[0].size) - 1
-
-
 @njit(cache=True, nogil=True)
 def _flag_grid(codes, policy, out):  # pragma: no cover - compiled
     count, n, channels = codes.shape
+    limits, gates, rule, neutral, estimates, variances, threshold = policy
     for j in range(count):
         previous = max(j - 1, 0)
         for i in range(n):
-            out[j, i] = dropped_channels(codes[j, i], codes[previous, i], 0, j, policy)
+            out[j, i] = dropped_channels(codes[j, i], codes[previous, i], 0, j, previous,
+                                         limits, gates, rule, neutral, estimates,
+                                         variances, threshold)
 
 
 def dropped_observations(codes: np.ndarray, policy) -> np.ndarray:

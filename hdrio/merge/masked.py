@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 from hdrio.jit import size_numba_threads
-from hdrio.merge.cliptest import dropped_channels_against
+from hdrio.merge.cliptest import dropped_channels
 from hdrio.merge.kernel import FLOAT32_MAX, FLOAT32_TINY, LOG_FLOAT32_MAX, LOG_FLOAT32_TINY
 from hdrio.merge.saturation import ClipPolicy
 
@@ -53,7 +53,9 @@ def _corner(position, size):  # pragma: no cover - compiled
 def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, out, first,
              factors):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
-    limits = policy[0]
+    # Unpacked once: the tuple handed on per pixel costs an atomic reference count per
+    # array and call (hdrio.merge.cliptest.dropped_channels).
+    limits, gates, rule, neutral, clip_estimates, variances, threshold = policy
     height = min(height, first + touched.shape[0] * cell)  # the band's rows
     rows, cols = keep.shape[1], keep.shape[2]
     scaled = factors.shape[1] > 0
@@ -82,11 +84,12 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
                         k = max(j - 1, 0)
                         while k > 0 and m[k] < 0.5:
                             k -= 1
-                        if j > 0 and m[k] < 0.5 and policy[2] == 2:
+                        if j > 0 and m[k] < 0.5 and rule == 2:
                             dropped[j] = 0  # no shorter bracket kept: nothing to test
                         else:
-                            dropped[j] = dropped_channels_against(
-                                codes[j, y, x], codes[k, y, x], 0, j, k, policy)
+                            dropped[j] = dropped_channels(
+                                codes[j, y, x], codes[k, y, x], 0, j, k, limits, gates,
+                                rule, neutral, clip_estimates, variances, threshold)
                     for c in range(channels):
                         numerator = 0.0
                         denominator = 0.0

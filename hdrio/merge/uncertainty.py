@@ -44,7 +44,9 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
     ``estimates`` ``(P, C, levels)``; ``policy`` the merge's saturation policy
     (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`).
     """
-    limits = policy[0]
+    # Unpacked once: the tuple handed on per pixel costs an atomic reference count per
+    # array and call (hdrio.merge.cliptest.dropped_channels).
+    limits, gates, rule, neutral, clip_estimates, clip_variances, threshold = policy
     count = codes.shape[0]
     channels = weights.shape[1]
     height, n = out.shape
@@ -60,8 +62,9 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
                 row = codes[kept, y]
                 z = row[i]
                 if z >= limits[c] or (dropped_channels(
-                        row, codes[max(kept - 1, 0), y], x * channels, kept, policy)
-                        >> c) & 1 == 1:
+                        row, codes[max(kept - 1, 0), y], x * channels, kept,
+                        max(kept - 1, 0), limits, gates, rule, neutral, clip_estimates,
+                        clip_variances, threshold) >> c) & 1 == 1:
                     break
                 w = weights[kept, c, z]
                 if w > 0.0:
