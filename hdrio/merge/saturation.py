@@ -179,6 +179,23 @@ def _same(a, b) -> bool:
     return a == b
 
 
+class _Sample:
+    """The pixels a policy is decided on: ``full``, the noise grid of ``codes`` (every
+    pixel sampled), and ``grid``, those of them no bracket is excluded at."""
+
+    def __init__(self, codes: np.ndarray, exclude: np.ndarray | None):
+        self.codes = codes
+        self.full = noise_grid(codes, MIXING_GRID_LIMIT)
+        self.seen = unexcluded(codes.shape, exclude)
+        self.grid = self.full if self.seen is None else self.full[:, self.seen]
+
+    def mixing(self, response: CameraResponse, exposures, limits) -> float:
+        """:func:`~hdrio.merge.clipping.channel_mixing` inside the sample's clips."""
+        interior = clip_interior(self.codes, limits, grid=self.full)
+        interior = interior if self.seen is None else interior[:, self.seen]
+        return channel_mixing(self.grid, response, exposures, limits, interior)
+
+
 def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
                 noise: NoiseModel | None, exposures=None, *,
                 exclude: np.ndarray | None = None) -> ClipPolicy:
@@ -205,18 +222,15 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
         return ClipPolicy.at_top(response.code_max, channels, policy)
     if noise is None:
         noise = NoiseModel.quantisation_only(channels)
-    full = noise_grid(codes, MIXING_GRID_LIMIT)
-    seen = unexcluded(codes.shape, exclude)
-    grid = full if seen is None else full[:, seen]
-    limits = saturation_limits(codes, response, noise, grid)
+    sample = _Sample(codes, exclude)
+    limits = saturation_limits(codes, response, noise, sample.grid)
     if policy == "safe" or exposures is None or codes.shape[0] < 2:
         return ClipPolicy(limits, rule="pixel", neutral=True)
+    grid = sample.grid
     clipped = np.any(grid >= limits, axis=-1)
     if not clipped.any():  # nothing clips: each channel dropped alone, nothing tested
         return ClipPolicy(limits)
-    interior = clip_interior(codes, limits, grid=full)
-    interior = interior if seen is None else interior[:, seen]
-    mixing = channel_mixing(grid, response, exposures, limits, interior)
+    mixing = sample.mixing(response, exposures, limits)
     gates = clip_gates(response, grid, limits, exposures)
     neutral = bool(mixing > MIXING_SHIFT)
     tables = clip_tables(response, exposures, noise,
@@ -279,11 +293,12 @@ def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse, *,
         return None
     noise = fit_noise(stack.codes, stack.exposures, response,
                       encoding=noise_encoding(stack.files, stack.code_max), exclude=exclude)
-    decided = clip_policy(policy, stack.codes, response, noise, stack.exposures,
-                          exclude=exclude)
-    if policy == "auto" and not decided.neutral:
+    sample = _Sample(stack.codes, exclude)
+    limits = saturation_limits(stack.codes, response, noise, sample.grid)
+    if policy == "auto" and not (  # clip_policy's neutral, without its test's tables
+            np.any(sample.grid >= limits)
+            and sample.mixing(response, stack.exposures, limits) > MIXING_SHIFT):
         return None
-    limits = decided.limits
     X = np.exp(response.log_inverse)
     times = np.asarray(stack.exposures, dtype=np.float64)
     reach = np.full((stack.count, X.shape[1]), X.shape[0], dtype=np.int64)
