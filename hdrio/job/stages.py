@@ -33,7 +33,7 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
-from hdrio.merge.saturation import SolveFilter, solve_filter
+from hdrio.merge.saturation import ClipPolicy, SolveFilter, clip_policy, solve_filter
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise
@@ -232,19 +232,24 @@ def stack_noise(stack: ExposureStack, response: CameraResponse,
 
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
-                  say: Progress) -> tuple[CameraResponse, NoiseModel | None]:
+                  say: Progress) -> tuple[CameraResponse, NoiseModel | None,
+                                          ClipPolicy | None]:
     """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved without
-    them (``solve``; ``None`` under exclusions): ``(response, noise)``, ``noise`` the
-    model the consistency test read (``None`` without deghosting). ``excluded``: the
-    observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
-    noise fit and the test too."""
+    them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``, ``noise`` the
+    model the consistency test read and ``clip`` the saturation policy it was decided
+    with (:func:`hdrio.merge.saturation.clip_policy` on the first response: the
+    observations it drops whole say nothing of motion), both ``None`` without
+    deghosting. ``excluded``: the observations the merge leaves out (``--mask``,
+    ``--exclude-color``), left out of the noise fit and the test too."""
     if plan.deghosts:
         say("deghosting")
-    noise = None
+    noise = clip = None
     if plan.deghosts and stack.count > 1:
         noise = stack_noise(stack, response, excluded)
+        clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
+                           stack.exposures, exclude=excluded)
     return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
-                        excluded), noise
+                        excluded, clip), noise, clip
 
 
 def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
