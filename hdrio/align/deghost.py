@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -129,26 +130,26 @@ def _fine_cells(suspect: np.ndarray, rows: int, cols: int, cell: int, size: int
             | suspect[first_r][:, last_c] | suspect[last_r][:, first_c])
 
 
-def _clipped_cells(codes: np.ndarray, bracket: int, cell: int, high: int, rows: int,
-                   cols: int) -> np.ndarray:
-    """``(rows, cols)`` counts, per cell, of the samples (every :data:`STRIDE`-th pixel)
-    where ``bracket`` has some channel above ``high`` (saturated); with ``bracket``
-    ``None``, of the samples. A region's clipped fraction is the first summed over its
-    cells over the second (the cells' sample grids line up, ``cell`` being a multiple of
-    the stride)."""
-    half = STRIDE // 2
+def _per_cell(grid: np.ndarray, cell: int, rows: int, cols: int) -> np.ndarray:
+    """``(rows, cols)`` counts of ``grid``'s true samples (every :data:`STRIDE`-th pixel,
+    ``codes[..., STRIDE // 2::STRIDE, STRIDE // 2::STRIDE]``) in each cell: the cells'
+    sample grids line up, ``cell`` being a multiple of the stride."""
     per = cell // STRIDE
-    view = codes[0 if bracket is None else bracket, half::STRIDE, half::STRIDE]
-    if bracket is None:
-        grid = np.ones(view.shape[:2], bool)
-    else:
-        grid = view[..., 0]
-        for c in range(1, view.shape[-1]):  # by channel: 25x faster than any(axis=-1)
-            grid = np.maximum(grid, view[..., c])
-        grid = grid > high
     padded = np.zeros((rows * per, cols * per), bool)
     padded[:grid.shape[0], :grid.shape[1]] = grid
     return padded.reshape(rows, per, cols, per).sum(axis=(1, 3), dtype=np.int32)
+
+
+def _clipped_cells(codes: np.ndarray, bracket: int, cell: int, high: int, rows: int,
+                   cols: int) -> np.ndarray:
+    """``(rows, cols)`` counts, per cell, of the samples where ``bracket`` has some
+    channel above ``high`` (saturated) (:func:`_per_cell`)."""
+    half = STRIDE // 2
+    view = codes[bracket, half::STRIDE, half::STRIDE]
+    largest = view[..., 0]
+    for c in range(1, view.shape[-1]):  # by channel: 25x faster than any(axis=-1)
+        largest = np.maximum(largest, view[..., c])
+    return _per_cell(largest > high, cell, rows, cols)
 
 
 def _excluded_cells(excluded: np.ndarray, cell: int, rows: int, cols: int) -> np.ndarray:
@@ -181,13 +182,20 @@ class _Candidates:
                          region: np.ndarray) -> float:
         """The fraction of ``region``'s samples (its cells within ``box``) where
         ``bracket`` is saturated."""
-        for j in (None, bracket):  # None: the samples
-            if j not in self.clipped:
-                high = int(self.tables.variance.shape[2]) - 2  # Z_max - 1: saturated above
-                self.clipped[j] = _clipped_cells(self.codes, j, self.cell, high,
-                                                 *self.moving.shape)
-        total = int(self.clipped[None][box][region].sum())
+        if bracket not in self.clipped:
+            high = int(self.tables.variance.shape[2]) - 2  # Z_max - 1: saturated above
+            self.clipped[bracket] = _clipped_cells(self.codes, bracket, self.cell, high,
+                                                   *self.moving.shape)
+        total = int(self.samples[box][region].sum())
         return float(self.clipped[bracket][box][region].sum()) / total if total else 0.0
+
+    @cached_property
+    def samples(self) -> np.ndarray:
+        """``(rows, cols)``: the samples of each cell (:func:`_per_cell`)."""
+        half = STRIDE // 2
+        grid = np.ones((len(range(half, self.codes.shape[1], STRIDE)),
+                        len(range(half, self.codes.shape[2], STRIDE))), bool)
+        return _per_cell(grid, self.cell, *self.moving.shape)
 
     def test(self, bracket: int):
         """:func:`cell_disagreement` against ``bracket`` over the moving cells."""
