@@ -21,7 +21,7 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 def dropped_reference(codes, j, policy) -> np.ndarray:
     """``(H, W, C)``: the channels of bracket ``j``'s observations (``codes`` ``(P, H, W,
     C)``) that ``policy`` (:class:`hdrio.merge.saturation.ClipPolicy`) drops besides
-    those at their limits, written from its description (hdrio/merge/cliptest.py), not
+    those at their limits, written from its description (hdrio/radiometry/cliptest.py), not
     from the kernel's code."""
     limits = np.asarray(policy.limits)
     gates = limits if policy.gates is None else np.asarray(policy.gates)

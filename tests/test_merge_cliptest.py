@@ -1,4 +1,4 @@
-"""The clip test (hdrio.merge.cliptest): observations a clip corrupted before the colour
+"""The clip test (hdrio.radiometry.cliptest): observations a clip corrupted before the colour
 matrix, found from the stack itself, on crafted codes, generated stacks and the
 hand-held canal stack; white levels only where the codes pile up."""
 
@@ -12,9 +12,9 @@ from scipy import ndimage
 
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_stack
-from hdrio.merge.cliptest import clip_tables, dropped_observations
 from hdrio.merge.saturation import ClipPolicy, clip_policy
 from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.cliptest import clip_tables, dropped_observations
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.stack import ExposureStack
 from hdrio.tools.synthetic import gamma_inverse_response, gamma_response, render_brackets

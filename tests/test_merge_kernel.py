@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hdrio.merge.cliptest import clip_tables, dropped_observations
 from hdrio.merge.saturation import ClipPolicy
 from hdrio.merge.weighted_mean import merge_brackets
+from hdrio.radiometry.cliptest import clip_tables, dropped_observations
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.stack import ExposureStack

@@ -29,8 +29,8 @@ from numba import njit
 from hdrio.align.comparametric import bounds, comparametric_correction
 from hdrio.io.staging import is_staged, release
 from hdrio.jit import INNER
-from hdrio.merge.cliptest import dropped_channels
 from hdrio.parallel import on_threads
+from hdrio.radiometry.cliptest import dropped_channels
 from hdrio.skips import well_exposed_codes
 
 CAP = 100.0
@@ -197,7 +197,7 @@ def _consistency(start, stop, codes, tables, clip, rules, todo,
 
     An observation the merge's saturation policy drops whole (``clip``,
     :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`;
-    :func:`hdrio.merge.cliptest.dropped_channels`: a clip before the camera's colour
+    :func:`hdrio.radiometry.cliptest.dropped_channels`: a clip before the camera's colour
     matrix bent its other channels) says nothing about motion: the merge never reads it.
     Such a bracket is passed over in the chain, and a sample whose reference's
     observation is one is left out. (A candle's flame through a camera that mixes its

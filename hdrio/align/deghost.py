@@ -40,7 +40,7 @@ import numpy as np
 
 from hdrio.align.comparametric import comparametric_correction, consistency_variance
 from hdrio.align.consistency import TEST_BANDS, Tables, cell_disagreement, test_tables
-from hdrio.merge.saturation import ClipPolicy
+from hdrio.radiometry.cliptest import untested
 
 __all__ = ["CELL", "TEST_BANDS", "Deghosting", "comparametric_correction",
            "consistency_variance", "deghost"]
@@ -247,8 +247,7 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
 def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, reference: int,
             coverage: np.ndarray | None = None, cell: int = CELL,
             threshold: float = THRESHOLD, resampled: bool = True, *,
-            excluded: np.ndarray | None = None, clip: ClipPolicy | None = None
-            ) -> Deghosting:
+            excluded: np.ndarray | None = None, clip: tuple | None = None) -> Deghosting:
     """Keep weights for every bracket of ``codes`` (module docstring).
 
     Parameters
@@ -276,17 +275,22 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         ``--mask``), or ``None``: a cell holding one, of the bracket or of the reference,
         says nothing about motion (Memorial's blue registration borders were flagged).
     clip
-        The merge's saturation policy (:func:`hdrio.merge.saturation.clip_policy`), or
-        ``None`` (each channel dropped alone at the top code): an observation it drops
-        whole is not tested (:func:`hdrio.align.consistency.cell_disagreement`).
+        The merge's saturation policy as its kernels take it
+        (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`) where it says the stack
+        mixes its channels after the clip, else ``None``: an observation it drops whole
+        is not tested (:func:`hdrio.align.consistency.cell_disagreement`), a clip bent
+        every channel of it. (Where a stack does not mix, the clip test drops only gross
+        disagreements with the shorter bracket, which a mover makes too, and every
+        observation is tested: a dark mover crossing four brackets,
+        tests/test_align_hard_cases.py, kept 20x the still stack's error where those
+        observations went untested; 15x is its bound.)
     """
     import scipy.ndimage
     count, height, width, _ = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
     tables = test_tables(codes, estimates, variance, reference)
     if clip is None:
-        clip = ClipPolicy.at_top(estimates.shape[2] - 1, codes.shape[3])
-    clip = clip.kernel_args()
+        clip = untested(estimates.shape[2] - 1, codes.shape[3])
     # The quick look. Its median cell says how far the noise model under-states the
     # noise (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG against its 8 s
     # with the interim model); the threshold is raised by that factor, up to

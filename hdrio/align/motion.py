@@ -29,7 +29,6 @@ from hdrio.align.registration import (
 from hdrio.align.resolve import sharp_edges
 from hdrio.align.warp import coverage, seen_elsewhere
 from hdrio.errors import HdrioError
-from hdrio.merge.saturation import ClipPolicy
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.noise_fit import fit_noise
@@ -125,7 +124,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
                  deghost_mode: str,
                  solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None,
                  noise: NoiseModel | None = None, excluded: np.ndarray | None = None,
-                 clip: ClipPolicy | None = None) -> CameraResponse:
+                 clip: tuple | None = None) -> CameraResponse:
     """Per-bracket keep weights (``motion.keep``): uncovered borders of warped brackets
     and, with ``deghost_mode`` ``auto``, observations inconsistent with the reference.
 
@@ -137,8 +136,9 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     ``noise``: the stack's noise model (:mod:`hdrio.radiometry.noise`), which the consistency
     test reads (:func:`hdrio.align.deghost.consistency_variance`); ``excluded``: ``(P, H,
     W)`` observations the merge leaves out (``--exclude-color``, ``--mask``); ``clip``: the
-    merge's saturation policy, whose observations dropped whole say nothing of motion
-    (:func:`hdrio.align.deghost.deghost`)."""
+    merge's saturation policy in a stack that mixes its channels after the clip, whose
+    observations dropped whole say nothing of motion (:func:`hdrio.align.deghost.deghost`;
+    the re-solved response's test reads the same)."""
     if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
         return response
     count, height, width, _ = stack.codes.shape
@@ -191,8 +191,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
                 stack.codes, linear_tables(solved, stack.exposures),
                 consistency_variance(solved, stack.exposures, noise), reference, cells,
                 resampled=motion.warped, excluded=excluded,
-                clip=None if clip is None else clip.for_brackets(solved, stack.exposures,
-                                                                 noise))
+                clip=clip)
             if second.fraction > 0:
                 motion.deghosting, response = second, solved
             else:

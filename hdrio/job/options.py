@@ -34,7 +34,7 @@ class MergeOptions:
     # "auto": a partly clipped observation is dropped whole where its other channels
     # disagree with the next shorter bracket's by more than noise (a clip before a
     # camera's colour matrix), else its clipped channels alone (hdrio/merge/saturation.py,
-    # hdrio/merge/cliptest.py).
+    # hdrio/radiometry/cliptest.py).
     saturation: str = "auto"
     exclude_colour: tuple[int, ...] | None = None
     # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.

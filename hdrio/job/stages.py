@@ -234,13 +234,14 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
                   say: Progress) -> tuple[CameraResponse, NoiseModel | None,
                                           ClipPolicy | None]:
-    """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved without
-    them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``, ``noise`` the
-    model the consistency test read and ``clip`` the saturation policy it was decided
-    with (:func:`hdrio.merge.saturation.clip_policy` on the first response: the
-    observations it drops whole say nothing of motion), both ``None`` without
-    deghosting. ``excluded``: the observations the merge leaves out (``--mask``,
-    ``--exclude-color``), left out of the noise fit and the test too."""
+    """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved
+    without them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``,
+    ``noise`` the model the consistency test read and ``clip`` the saturation policy it
+    was decided with (:func:`hdrio.merge.saturation.clip_policy` on the first response:
+    in a stack that mixes its channels after the clip, the observations it drops whole
+    say nothing of motion), both ``None`` without deghosting. ``excluded``: the
+    observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
+    noise fit and the test too."""
     if plan.deghosts:
         say("deghosting")
     noise = clip = None
@@ -248,8 +249,9 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
         noise = stack_noise(stack, response, excluded)
         clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
                            stack.exposures, exclude=excluded)
+    mixed = clip.kernel_args() if clip is not None and clip.neutral else None
     return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
-                        excluded, clip), noise, clip
+                        excluded, mixed), noise, clip
 
 
 def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,

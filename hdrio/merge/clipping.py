@@ -3,14 +3,14 @@ test starts, and whether the camera mixed its channels after the clip.
 
 Measured on a regular grid of at most :data:`MIXING_GRID_LIMIT` pixels of every bracket
 (:func:`hdrio.radiometry.noise.noise_grid`); :mod:`hdrio.merge.saturation` decides the policy
-from these measures and :mod:`hdrio.merge.cliptest` applies it.
+from these measures and :mod:`hdrio.radiometry.cliptest` applies it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hdrio.merge.cliptest import ClipTables
+from hdrio.radiometry.cliptest import ClipTables
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.noise_fit import grid_stride, noise_grid
@@ -95,7 +95,7 @@ def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseM
     when already read. No code below that is called a white level: a camera's soft
     shoulder, codes that run smoothly to the top, is its response, which the solve
     recovers; what a clip did to the observations below it is the clip test's
-    (:mod:`hdrio.merge.cliptest`), one observation at a time.
+    (:mod:`hdrio.radiometry.cliptest`), one observation at a time.
     """
     grid = noise_grid(codes) if grid is None else grid
     white = white_levels(grid, response.code_max)
@@ -113,7 +113,7 @@ def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseM
 def clip_gates(response: CameraResponse, grid: np.ndarray, limits: np.ndarray,
                exposures) -> np.ndarray:
     """``(C,)`` codes from which an observation is *near the clip* and tested
-    (:mod:`hdrio.merge.cliptest`), at most ``limits``: the lower of two codes.
+    (:mod:`hdrio.radiometry.cliptest`), at most ``limits``: the lower of two codes.
 
     * The least code whose exposure ``f^-1(z)`` is 90 % of the white level's
       (:func:`white_levels` of ``grid``): a raw channel that clipped before the colour
@@ -264,7 +264,7 @@ _SPREAD_SAMPLES = 50  # clean pairs a spread needs
 def test_spreads(grid: np.ndarray, tables: ClipTables, gates: np.ndarray) -> np.ndarray:
     """``(P, C)``, at least 1: how far clean observations of bracket ``j`` (no channel of
     it or of bracket ``j - 1`` at or above its gate) disagree with bracket ``j - 1``'s, in
-    the clip test's standard deviations (:mod:`hdrio.merge.cliptest`): the robust spread
+    the clip test's standard deviations (:mod:`hdrio.radiometry.cliptest`): the robust spread
     (median absolute value over 0.6745) of ``(x_j - x_{j-1}) / sqrt(var x_j + var
     x_{j-1})`` over codes above 5 % of the range in both. Row 0, and a pair with fewer
     than 50 such observations, 1.

@@ -24,7 +24,7 @@ multiply-add.
 **Whole observations** (the pixel rule: any dropped channel drops the whole observation,
 the tutorial's ``pixel`` and the ``safe`` policy; the clip test of ``auto``, which drops
 a partly clipped observation whole where its other channels disagree with the next
-shorter bracket's, :mod:`hdrio.merge.cliptest`) are dropped by remapping each bracket's
+shorter bracket's, :mod:`hdrio.radiometry.cliptest`) are dropped by remapping each bracket's
 row before it is summed, into a per-task buffer: every code of such an observation
 becomes ``Z_max``. The per-channel resets then apply it, through the same pair tables
 (the tutorial's per-pixel policy used to take one look-up per code instead).
@@ -70,7 +70,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from hdrio.merge.cliptest import dropped_channels
 from hdrio.merge.row_sums import (
     INLINED,
     KERNEL,
@@ -78,6 +77,7 @@ from hdrio.merge.row_sums import (
     accumulate_by_pairs,
 )
 from hdrio.parallel import on_threads
+from hdrio.radiometry.cliptest import dropped_channels
 
 MAX_BRACKETS = 64
 """Brackets one merge takes (more is never a real bracket set)."""
@@ -190,7 +190,7 @@ def _fallback(codes, source, row, y, stop, x, c, limits,
 @njit(**INLINED)
 def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compiled
     """``out``: bracket ``j``'s row ``y`` with every channel the policy drops besides its
-    limit's (:func:`hdrio.merge.cliptest.dropped_channels`: every channel of an
+    limit's (:func:`hdrio.radiometry.cliptest.dropped_channels`: every channel of an
     observation dropped whole) set to ``Z_max``, so that the per-channel resets apply
     the policy (a channel at or above its limit they drop themselves). The pixel rule
     in one pass written so that it vectorises; the clip test copies the row and tests
@@ -356,7 +356,7 @@ class KernelTables:
         (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`): ``limits`` ``(C,)``
         int64, the first code of each channel that is dropped (``code_max`` drops the top
         code only), applied by the resets, and the observations it drops whole
-        (:func:`hdrio.merge.cliptest.dropped_channels`: the pixel rule, or the clip
+        (:func:`hdrio.radiometry.cliptest.dropped_channels`: the pixel rule, or the clip
         test), for which each bracket's row is first remapped (:func:`_remap_row`, into a
         per-task buffer).
     log_domain

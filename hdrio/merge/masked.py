@@ -8,7 +8,7 @@ overwrites them:
 ``sum = sum * (1 - m_j s_j) + m_j t_j(z_j)`` over the brackets, longest first,
 
 with ``s_j`` 1 where the code is at or above the saturation policy's limit or the policy
-drops the channel (:func:`hdrio.merge.cliptest.dropped_channels`: the kernel's
+drops the channel (:func:`hdrio.radiometry.cliptest.dropped_channels`: the kernel's
 reset, so ``m_j = 1`` everywhere gives the kernel's result) and ``t_j`` the
 table's term. A dropped bracket
 (``m_j = 0``) neither adds its term nor resets the sums with its saturation: a moving
@@ -35,9 +35,9 @@ import numpy as np
 from numba import njit, prange
 
 from hdrio.jit import size_numba_threads
-from hdrio.merge.cliptest import dropped_channels
 from hdrio.merge.kernel import FLOAT32_MAX, FLOAT32_TINY, LOG_FLOAT32_MAX, LOG_FLOAT32_TINY
 from hdrio.merge.saturation import ClipPolicy
+from hdrio.radiometry.cliptest import dropped_channels
 
 
 @njit(cache=True, nogil=True)
@@ -54,7 +54,7 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
              factors):  # pragma: no cover - compiled
     count, height, width, channels = codes.shape
     # Unpacked once: the tuple handed on per pixel costs an atomic reference count per
-    # array and call (hdrio.merge.cliptest.dropped_channels).
+    # array and call (hdrio.radiometry.cliptest.dropped_channels).
     limits, gates, rule, neutral, clip_estimates, variances, threshold = policy
     height = min(height, first + touched.shape[0] * cell)  # the band's rows
     rows, cols = keep.shape[1], keep.shape[2]
@@ -157,7 +157,7 @@ def remerge_masked(codes: np.ndarray, keep: np.ndarray, cell: int, terms: np.nda
         the band, cols)`` multiply the keep weights per cell, not interpolated
         (:mod:`hdrio.align.resampling`); the cells where one is below 1 are re-merged too.
 
-    The clip test (:mod:`hdrio.merge.cliptest`) reads, for each bracket, the next shorter
+    The clip test (:mod:`hdrio.radiometry.cliptest`) reads, for each bracket, the next shorter
     one whose keep weight (before ``factors``) is 0.5 or more: the codes of a bracket
     masked out (``--mask``, ``--exclude-color``) or dropped as a mover say nothing of the
     pixel. A bracket only down-weighted for its resampling error is still read: it saw

@@ -11,7 +11,7 @@ on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 ``auto`` (the default)
     each observation near the clip (a channel at or above its gate, another below its
-    limit) is tested against the next shorter bracket (:mod:`hdrio.merge.cliptest`): dropped
+    limit) is tested against the next shorter bracket (:mod:`hdrio.radiometry.cliptest`): dropped
     whole where its other channels disagree with it by more than noise (by more,
     where the stack does not show its channels mixed after the clip), else its clipped
     channels alone. In the shortest bracket, which has nothing to be tested
@@ -54,7 +54,7 @@ from hdrio.merge.clipping import (
     test_spreads,
     unexcluded,
 )
-from hdrio.merge.cliptest import (
+from hdrio.radiometry.cliptest import (
     APART_SIGMAS,
     CLIP_SIGMAS,
     RULES,
@@ -69,15 +69,18 @@ from hdrio.stack import ExposureStack
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")
 
-MIXING_SHIFT = 0.7
+MIXING_SHIFT = 0.9
 """Spreads (:func:`hdrio.merge.clipping.channel_mixing`, inside clips) above which a stack
 shows its channels mixed after the clip. Stacks that keep their channels apart measure
 at most 0.41 (the truth harness's renders), memorial 0.39, canal (``alignment/``) 0.36,
-``ghost/`` 0; the camera-like stacks (a real camera's matrix after the raw clip) 0.73 to
-111, but for CandleGlass's small glints at sensor noise (0.38, 0.44), which say too
-little either way. At 1.0, CandleGlass through the D700 and the ILCE-7 at low noise
-(0.93, 0.999) were tested as unmixed and their hue error's p99 was 1.62x and 1.54x the
-clipped-observation oracle's; at 0.7, 0.99x and 0.97x."""
+but 0.83 once warped (the response's re-solve after alignment: resampling blends a
+clip's edge), ``ghost/`` 0; the camera-like stacks (a real camera's matrix after the raw
+clip) 0.93 to 111, but for CandleGlass's small glints and Desk through the D700 at
+sensor noise (0.38-0.81), which say too little either way. At 1.0, CandleGlass through
+the D700 and the ILCE-7 at low noise (0.93, 0.999) were tested as unmixed and their hue
+error's p99 was 1.62x and 1.54x the clipped-observation oracle's; at 0.9, 0.99x and
+0.97x. At 0.7 canal's warped re-solve left out its observations at the clip and its sky
+edges' fringe grew from 12 pixels to 22 (tests/test_merge_cliptest.py)."""
 
 @dataclass(frozen=True)
 class ClipPolicy:
@@ -95,7 +98,7 @@ class ClipPolicy:
     rule
         ``channel`` (a channel at its limit is dropped alone), ``pixel`` (the whole
         observation), ``test`` (whole where it fails the clip test,
-        :mod:`hdrio.merge.cliptest`, else the clipped channels alone).
+        :mod:`hdrio.radiometry.cliptest`, else the clipped channels alone).
     neutral
         A partly clipped observation of the shortest bracket is dropped whole, so the
         pixel takes the neutral lower bound (the pixel rule, and ``test`` on a stack that
@@ -160,7 +163,7 @@ class ClipPolicy:
     def kernel_args(self) -> tuple:
         """The policy as the compiled kernels take it: ``(limits, gates, rule, neutral,
         estimates, variances, sigmas squared)``, the tables ``(1, 1, 1)`` zeros when
-        there is no test (:func:`hdrio.merge.cliptest.dropped_channels`)."""
+        there is no test (:func:`hdrio.radiometry.cliptest.dropped_channels`)."""
         empty = np.zeros((1, 1, 1))
         tables = self.tables
         limits = np.ascontiguousarray(self.limits, dtype=np.int64)
@@ -209,9 +212,9 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
 
     ``channel``, ``pixel``: at the top code. ``safe``: the pixel rule at the white levels
     less the noise margin (:func:`~hdrio.merge.clipping.saturation_limits`). ``auto``:
-    the clip test at those limits (:mod:`hdrio.merge.cliptest`: at
-    :data:`~hdrio.merge.cliptest.CLIP_SIGMAS` where the stack mixes its channels,
-    :data:`~hdrio.merge.cliptest.APART_SIGMAS` where not), the shortest bracket's
+    the clip test at those limits (:mod:`hdrio.radiometry.cliptest`: at
+    :data:`~hdrio.radiometry.cliptest.CLIP_SIGMAS` where the stack mixes its channels,
+    :data:`~hdrio.radiometry.cliptest.APART_SIGMAS` where not), the shortest bracket's
     partly clipped observations dropped whole where
     :func:`~hdrio.merge.clipping.channel_mixing` (inside clips,
     :func:`~hdrio.merge.clipping.clip_interior`) exceeds 1; without ``exposures``

@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit, prange
 
 from hdrio.jit import size_numba_threads
-from hdrio.merge.cliptest import dropped_channels
 from hdrio.merge.saturation import ClipPolicy
+from hdrio.radiometry.cliptest import dropped_channels
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, observation_variance
 from hdrio.radiometry.tables import estimate_tables
@@ -45,7 +45,7 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
     (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`).
     """
     # Unpacked once: the tuple handed on per pixel costs an atomic reference count per
-    # array and call (hdrio.merge.cliptest.dropped_channels).
+    # array and call (hdrio.radiometry.cliptest.dropped_channels).
     limits, gates, rule, neutral, clip_estimates, clip_variances, threshold = policy
     count = codes.shape[0]
     channels = weights.shape[1]

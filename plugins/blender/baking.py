@@ -18,7 +18,7 @@ brackets (:class:`hdrio.merge.saturation.ClipPolicy`: each channel's limit, the 
 test's gates, whether the shortest bracket's partly clipped observations take the
 neutral lower bound); the clip test's tables for the node's exposures come from
 :meth:`~hdrio.merge.saturation.ClipPolicy.for_brackets` (``x_j(z)`` and the standard
-deviation of each observation, :mod:`hdrio.merge.cliptest`).
+deviation of each observation, :mod:`hdrio.radiometry.cliptest`).
 
 The compositor sees a bracket as code values scaled to [0, 1] (the image read as
 *Non-Color*: ``z = Z / Z_max``). A curve holds values in [0, 1], so each table is stored

@@ -54,7 +54,7 @@ def _every(build: GraphBuilder, values: list):
 
 
 class _ClipTest:
-    """The saturation policy of :mod:`hdrio.merge.cliptest` in Math nodes, one bracket
+    """The saturation policy of :mod:`hdrio.radiometry.cliptest` in Math nodes, one bracket
     after another (shortest first): which channels of each observation are dropped."""
 
     def __init__(self, build: GraphBuilder, baked: BakedMerge) -> None:

@@ -42,11 +42,15 @@ the neutral lower bound, and kept channel by channel otherwise.
 The test is a function of the two brackets' codes at one pixel, through tables of
 ``x_j`` and ``var x_j`` per code: the merge kernel (:mod:`hdrio.merge.kernel`), the
 masked re-merge (:mod:`hdrio.merge.masked`), the uncertainty layer and the Blender
-add-on's node graph apply the same test from the same tables (:class:`ClipTables`).
+add-on's node graph apply the same test from the same tables (:class:`ClipTables`);
+deghosting's consistency test (:mod:`hdrio.align.consistency`) passes over what it
+drops where the stack mixes its channels after the clip. (It sits in radiometry, below
+both, because alignment and the merge never import each other.)
 
 :func:`dropped_channels` is compiled into those modules' cached kernels: numba's cache
 checks only each kernel's own file, so after editing this one in a checkout, delete
-``hdrio/merge/__pycache__/*.nb*`` (an install writes every file anew, which does it).
+``hdrio/merge/__pycache__/*.nb*`` and ``hdrio/align/__pycache__/*.nb*`` (an install
+writes every file anew, which does it).
 """
 
 from __future__ import annotations
@@ -156,6 +160,14 @@ def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, 
                 variances[j, c, z] + variances[k, c, y]):
             return whole
     return 0
+
+
+def untested(code_max: int, channels: int) -> tuple:
+    """The policy's parts (:func:`dropped_channels`) of one that drops nothing whole: each
+    channel alone at the top code, no test."""
+    limits = np.full(channels, code_max, np.int64)
+    return (limits, limits, np.int64(0), False, np.zeros((1, 1, 1)), np.zeros((1, 1, 1)),
+            np.zeros((1, channels)))
 
 
 @njit(cache=True, nogil=True)
