@@ -114,7 +114,9 @@ def dark_ratios(result, exclude: np.ndarray | None = None) -> np.ndarray:
     times = np.broadcast_to(np.asarray(stack.channel_exposures, np.float64).reshape(count, -1),
                             (count, channels))
     out = np.full((channels, 4), np.nan)
-    whole = np.all(codes < limits, axis=-1) if result.statistics.pixel_rule else None
+    policy = result.statistics.policy
+    whole = np.all(codes < limits, axis=-1) if policy is not None and policy.pixel_rule \
+        else None
     for c in range(channels):
         unclipped = whole if whole is not None else codes[..., c] < limits[c]
         longest = np.where(unclipped.any(axis=0),

@@ -445,16 +445,19 @@ def test_masked_remerge_keeps_what_the_kept_brackets_saw_where_they_clip():
     drops a shorter bracket under a clipped reference only when it is inconsistent with
     the clip (a dark object there: keeping the kernel's merge kept it twice)."""
     from hdrio.merge.masked import remerge_masked
+    from hdrio.merge.saturation import ClipPolicy
 
     terms, estimates, codes = _two_brackets()
     codes[1] = 255  # the reference, clipped: only the shorter bracket sees the scene
     keep = np.ones((2, 2, 2))
     keep[0] = 0.0  # ... and it is dropped
     radiance = np.full((16, 16, 3), 7.0, np.float32)  # stands for the kernel's merge
-    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    remerge_masked(codes, keep, 8, terms, estimates, ClipPolicy.at_top(255, 3), False,
+                   radiance)
     assert np.allclose(radiance, 255 / 4.0)  # the clipped reference's bound
     codes[1] = 200  # the reference sees it: the dropped bracket's view is replaced
-    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    remerge_masked(codes, keep, 8, terms, estimates, ClipPolicy.at_top(255, 3), False,
+                   radiance)
     assert np.allclose(radiance, 200 / 4.0)
 
 
@@ -462,15 +465,17 @@ def test_masked_remerge_drops_codes_at_the_merges_saturation_limits():
     """With keep weights of (nearly) 1 the re-merge is the kernel's merge, which drops
     codes at or above the saturation policy's limits (below Z_max under ``auto``)."""
     from hdrio.merge.masked import remerge_masked
+    from hdrio.merge.saturation import ClipPolicy
 
     terms, estimates, codes = _two_brackets()
     codes[1] = 250  # in the longer bracket's shoulder
     keep = np.full((2, 2, 2), 0.999)
     radiance = np.zeros((16, 16, 3), np.float32)
-    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance,
-                   limits=(250, 250, 250))
+    remerge_masked(codes, keep, 8, terms, estimates, ClipPolicy(np.array([250, 250, 250])),
+                   False, radiance)
     assert np.allclose(radiance, 100.0)  # the shorter bracket's alone
-    remerge_masked(codes, keep, 8, terms, estimates, 255, False, False, radiance)
+    remerge_masked(codes, keep, 8, terms, estimates, ClipPolicy.at_top(255, 3), False,
+                   radiance)
     assert np.allclose(radiance, (100.0 + 250 / 4.0) / 2)  # Z_max alone: both count
 
 

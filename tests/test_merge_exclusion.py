@@ -175,7 +175,12 @@ def test_a_bracket_s_own_mask_moves_with_it_when_aligned(tmp_path):
             values[own] = 0
         masks.append(tmp_path / "masks" / name)
         _write_grey(masks[-1], values)
-    aligned = MergeOptions(align="euclidean", deghost="off", masks=tuple(map(str, masks)))
+    # Saturation channel by channel at the top code: the auto policy's limits sit below
+    # the white level by the noise model's margin, and on this small warped stack the
+    # noise fit moves with the registration (green's limit 230 on the clean stack, 207
+    # on the spoilt one), which is not what this test is about.
+    aligned = MergeOptions(align="euclidean", deghost="off", masks=tuple(map(str, masks)),
+                           saturation="channel")
     # The same masks on the clean stack: what the merge is without that bracket there.
     clean = merge_paths(write(tmp_path / "clean", codes), options=aligned).radiance
     spoilt = codes.copy()

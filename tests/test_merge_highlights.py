@@ -63,14 +63,14 @@ def test_lamp_hue_is_restored_and_nothing_is_darker(saturation):
     # share of grey background and noise; clip is 30x beyond it.
     assert np.percentile(_chromaticity_error(clip.radiance, scene, region), 99) > 0.25
     assert np.percentile(_chromaticity_error(rebuilt.radiance, scene, region), 99) < 0.01
-    if not clip.statistics.pixel_rule:  # clip keeps the partly clipped pixels' hue angle
+    if not clip.statistics.policy.neutral:  # clip keeps the partly clipped pixels' hue angle
         # Measured: 53.8 degrees p99 (red at its bound), 0.35 reconstructed.
         assert np.percentile(hue_angle_error(rebuilt.radiance, scene, partly), 99) < 2.0
     out = rebuilt.radiance
     assert np.isfinite(out).all() and (out > 0).all()
     np.testing.assert_array_equal(out[~region], clip.radiance[~region])  # only the clip
     lost = shortest >= np.asarray(limits)
-    if not clip.statistics.pixel_rule:  # the merge's values are each channel's own bound
+    if not clip.statistics.policy.neutral:  # the merge's values are each channel's own bound
         assert (out[partly] >= clip.radiance[partly])[lost[partly]].all()
     # Fully clipped: never darker than the neutral bound (the channels' mean).
     assert (out[fully].mean(-1) >= clip.radiance[fully].mean(-1) * (1 - 1e-6)).all()

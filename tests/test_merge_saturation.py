@@ -103,7 +103,7 @@ def test_safe_policy_matches_the_raw_clip_oracle_with_noise():
 
 def test_auto_keeps_channels_apart_on_an_unmixed_camera():
     from benchmarks.truth.stacks import exposure_ladder
-    from hdrio.merge.saturation import policy_limits
+    from hdrio.merge.saturation import clip_policy
     from hdrio.radiometry.noise import NoiseModel
 
     scene = _scene("Desk")
@@ -112,10 +112,10 @@ def test_auto_keeps_channels_apart_on_an_unmixed_camera():
     rules = []
     for options in ({}, {"mixing": False}, {"mix_before_clip": True}):
         codes, _ = render_camera_brackets(scene.radiance, times, seed=1, **options)
-        _, pixel_rule = policy_limits("auto", codes, response,
-                                      NoiseModel.quantisation_only(3), times)
-        rules.append(pixel_rule)
-    # Only the camera that mixes after the clip takes the pixel rule.
+        policy = clip_policy("auto", codes, response, NoiseModel.quantisation_only(3), times)
+        rules.append(policy.neutral)
+    # Only the camera that mixes after the clip drops the shortest bracket's partly
+    # clipped observations whole (the neutral lower bound).
     assert rules == [True, False, False]
 
 
@@ -126,7 +126,8 @@ def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
     # and 6.2 (GoldenGate) spreads at 200 px, above the threshold of 1; inside clips,
     # where a camera's matrix still biases every pixel, it is 0.22 and 0.13.
     from benchmarks.truth.stacks import exposure_ladder, jpeg_round_trip
-    from hdrio.merge import saturation
+    from hdrio.merge import clipping as saturation
+    from hdrio.merge.saturation import clip_policy
     from hdrio.radiometry.noise import noise_encoding
     from hdrio.radiometry.noise_fit import fit_noise, noise_grid
     from hdrio.tools.synthetic import render_brackets
@@ -141,12 +142,11 @@ def test_auto_keeps_channels_apart_on_jpeg_brackets_without_mixing(name):
     assert saturation.channel_mixing(grid, response, times, limits) > 1.0
     inside = saturation.clip_interior(codes, limits)
     assert saturation.channel_mixing(grid, response, times, limits, inside) < 0.5
-    _, pixel_rule = saturation.policy_limits("auto", codes, response, noise, times)
-    assert not pixel_rule
+    assert not clip_policy("auto", codes, response, noise, times).neutral
 
 
 def test_white_level_below_the_top_code_is_found():
-    from hdrio.merge.saturation import white_levels
+    from hdrio.merge.clipping import white_levels
 
     rng = np.random.default_rng(0)
     grid = rng.integers(0, 240, (3, 5000, 3)).astype(np.uint8)
@@ -172,7 +172,7 @@ def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
     output = tmp_path / "f.exr"
     result = merge_files(_frobisher(), output, options=MergeOptions(clip_mask=True),
                          pixel_type="float")
-    assert result.statistics.pixel_rule  # a 5D Mark II mixes after the clip (1.8 spreads)
+    assert result.statistics.policy.neutral  # a 5D Mark II mixes after the clip
     import OpenImageIO as oiio
 
     buffer = oiio.ImageBuf(str(output))
@@ -219,7 +219,7 @@ def test_clip_mask_round_trip_and_check_summary(tmp_path):
 
 
 def test_clip_interior_is_false_within_the_radius_of_a_clip_edge():
-    from hdrio.merge.saturation import clip_interior
+    from hdrio.merge.clipping import clip_interior
 
     codes = np.full((2, 40, 40, 3), 100, np.uint8)
     codes[1, :, 20:, 0] = 255  # red clipped in the right half of the longer bracket

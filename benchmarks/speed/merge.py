@@ -24,7 +24,7 @@ def reconstructed(stack: ExposureStack, response) -> np.ndarray:
     radiance, statistics = MERGE_METHODS["inverse-variance"](stack, response)
     reconstruct_highlights(radiance, stack.codes[0], statistics.limits,
                            estimate_tables(response, stack.channel_exposures, "linear")[0],
-                           statistics.pixel_rule)
+                           statistics.policy.neutral)
     return radiance
 
 

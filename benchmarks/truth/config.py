@@ -71,10 +71,15 @@ def full_design(scenes: Sequence[str] = SCENES, curves: Sequence[str] = CURVES
       with DoRF 0 and GoldenGate with DoRF 200 (a strong toe);
     * ``jpeg``: every scene with the EMoR mean curve, through JPEG quality 90;
     * ``16-bit``: three scenes (every scene when fewer than six) with the EMoR mean
-      curve at 16 bits (hdrio only: OpenCV's and colour-hdri's Debevec take 8-bit).
+      curve at 16 bits (hdrio only: OpenCV's and colour-hdri's Debevec take 8-bit);
+    * ``camera``: every scene with the EMoR mean curve through every camera of
+      :data:`benchmarks.truth.camera.CAMERAS` (raw clip, white balance, colour matrix)
+      at both noise levels (:data:`benchmarks.truth.camera.NOISE_LEVELS`).
 
     With user scenes the ladder pairs are the first and second scene.
     """
+    from benchmarks.truth.camera import CAMERAS, NOISE_LEVELS
+
     frames, ev = REFERENCE_LADDER
     first, second = (("Desk", "GoldenGate") if set(scenes) >= {"Desk", "GoldenGate"}
                      else (scenes[0], scenes[min(1, len(scenes) - 1)]))
@@ -87,17 +92,19 @@ def full_design(scenes: Sequence[str] = SCENES, curves: Sequence[str] = CURVES
     jpeg = [StackSpec(s, typical, frames, ev, jpeg=True, group="jpeg") for s in scenes]
     deep_scenes = ("Desk", "GoldenGate", "StillLife") if set(scenes) >= set(SCENES) else scenes
     deep = [StackSpec(s, typical, frames, ev, bits=16, group="16-bit") for s in deep_scenes]
-    return tuple(core + ladder + jpeg + deep)
+    camera = [StackSpec(s, typical, frames, ev, group="camera", camera=c, noise=n)
+              for s in scenes for c in CAMERAS for n in NOISE_LEVELS]
+    return tuple(core + ladder + jpeg + deep + camera)
 
 
-GROUPS = ("core", "ladder", "jpeg", "16-bit")
+GROUPS = ("core", "ladder", "jpeg", "16-bit", "camera")
 
 
 def full_config(scene_paths: dict[str, str] | None = None, width: int | None = 400,
                 repeats: int = 3, methods: tuple[str, ...] | None = None,
                 groups: tuple[str, ...] | None = None) -> Config:
-    """The full run: 73 stacks, scenes ~400 px wide (box factor 2-3), 3 timed calls on the
-    core stacks; about 16 minutes on 2 cores (docs/accuracy.md has the measured time).
+    """The full run: 121 stacks (73 and 48 camera-like), scenes ~400 px wide (box factor
+    2-3), 3 timed calls on the core stacks (docs/accuracy.md has the measured time).
     ``groups`` (of :data:`GROUPS`) keeps only those parts of the design.
 
     colour-hdri's dense least-squares solve (about 3 s a call whatever the image size)

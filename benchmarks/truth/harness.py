@@ -120,6 +120,8 @@ def run(config: Config, progress: Progress | None = None) -> dict[str, object]:
                 row.update(status="ok", time_s=statistics.median(times), times_s=times,
                            peak_mb=peak)
                 row.update(evaluate(output, stack, masks))
+                if output.saturation is not None:
+                    row["saturation"] = output.saturation
                 del output
             except Exception as error:  # a peer (or hdrio) failing is a result, not a crash
                 row.update(status="error", error=f"{type(error).__name__}: {error}")

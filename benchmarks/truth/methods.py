@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from benchmarks.truth.report import NOISE_ORACLE
+from benchmarks.truth.report import CLIP_ORACLE, NOISE_ORACLE
 from benchmarks.truth.stacks import READ_NOISE, SHOT_NOISE, Stack
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_stack
@@ -29,10 +29,12 @@ from hdrio.stack import ExposureStack
 
 @dataclass(frozen=True)
 class MethodOutput:
-    """``radiance`` RGB ``(H, W, 3)`` (any positive scale) and ``log_inverse`` ``(L, 3)``."""
+    """``radiance`` RGB ``(H, W, 3)`` (any positive scale) and ``log_inverse`` ``(L, 3)``;
+    ``saturation``: what hdrio's saturation policy decided, for the report."""
 
     radiance: np.ndarray
     log_inverse: np.ndarray | None
+    saturation: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,8 @@ class Method:
     requires: str | None = None
     description: str = ""
     settings: dict = field(default_factory=dict)
+    clip_truth: bool = False
+    """Runs only on stacks that know which observations clipped in raw (``camera``)."""
 
     def missing(self) -> str | None:
         """Why the method cannot run here (its module is not installed), else ``None``."""
@@ -70,8 +74,9 @@ class Method:
         return None
 
     def supports(self, stack: Stack) -> bool:
-        """Whether the method accepts the stack's bit depth."""
-        return stack.spec.bits in self.bits
+        """Whether the method accepts the stack's bit depth (and knows its clip)."""
+        return stack.spec.bits in self.bits and (not self.clip_truth
+                                                 or stack.clipped is not None)
 
 
 def exposure_stack(stack: Stack) -> ExposureStack:
@@ -85,7 +90,11 @@ def exposure_stack(stack: Stack) -> ExposureStack:
 def _hdrio(options: MergeOptions) -> Callable[[Stack], MethodOutput]:
     def run(stack: Stack) -> MethodOutput:
         result = merge_stack(exposure_stack(stack), options)
-        return MethodOutput(result.radiance, result.response.log_inverse)
+        policy = getattr(result.statistics, "policy", None)
+        saturation = None if policy is None else {
+            "rule": policy.rule, "neutral": bool(policy.neutral), "mixing": policy.mixing,
+            "dropped": policy.dropped, "limits": [int(v) for v in policy.limits]}
+        return MethodOutput(result.radiance, result.response.log_inverse, saturation)
 
     return run
 
@@ -131,6 +140,20 @@ def _oracle_Poisson(stack: Stack) -> MethodOutput:
     """True response, the Poisson estimator (sum of linear values over sum of times)."""
     response, _ = true_response(stack)
     radiance, _ = MERGE_METHODS["Poisson"](exposure_stack(stack), response,
+                                           noise=true_noise(stack))
+    return MethodOutput(radiance, response.log_inverse)
+
+
+def _oracle_clipped(stack: Stack) -> MethodOutput:
+    """Exactly the raw-clipped observations dropped (whole), the true response, weights
+    by exposure (:mod:`benchmarks.truth.camera`)."""
+    from benchmarks.truth.camera import oracle_codes
+
+    response, _ = true_response(stack)
+    codes = oracle_codes(stack.codes, stack.clipped, stack.code_max)
+    exposures = ExposureStack.from_arrays(codes, stack.times, code_max=stack.code_max,
+                                          files=[f"frame{j}.png" for j in range(codes.shape[0])])
+    radiance, _ = MERGE_METHODS["Poisson"](exposures, response, saturation="channel",
                                            noise=true_noise(stack))
     return MethodOutput(radiance, response.log_inverse)
 
@@ -232,6 +255,9 @@ def all_methods() -> list[Method]:
                            "bound hdrio is measured against"),
         Method("oracle Poisson", "reference", _oracle_Poisson,
                description="true response, Poisson estimator (no noise parameters)"),
+        Method(CLIP_ORACLE, "reference", _oracle_clipped, (8,), clip_truth=True,
+               description="camera-like stacks: exactly the raw-clipped observations "
+                           "dropped, true response, weights by exposure"),
     ]
     return methods
 

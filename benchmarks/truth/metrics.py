@@ -123,4 +123,12 @@ def evaluate(output: MethodOutput, stack: Stack, masks: dict[str, np.ndarray]
     rms, bad = response_rms_stops(output.log_inverse, stack.curve, stack.code_max)
     row["response_rms_stops"] = rms
     row["response_nonfinite"] = bad
+    if stack.clipped is not None:  # camera-like: hue where a raw clip puts it at risk
+        from benchmarks.truth.camera import transition_hue, transition_pixels
+
+        mask = transition_pixels(stack.codes, stack.clipped, stack.code_max, LOW, HIGH)
+        row["transition"] = {**transition_hue(radiance, truth, mask & positive),
+                             **{k: v for k, v in errors_at_scale(
+                                 radiance, truth, mask & positive, scale).items()
+                                if k in ("median", "bias")}}
     return row

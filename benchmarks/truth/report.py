@@ -12,9 +12,12 @@ GROUPS = (("core", "Core: 8-bit, 7 frames 2 EV apart, every scene x every curve"
           ("ladder", "Ladders: 8-bit, the other 11 ladders (3/5/7/9 frames x 1/2/3 EV)"),
           ("jpeg", "JPEG: 8-bit through JPEG quality 90 (4:2:0), 7 frames 2 EV apart"),
           ("16-bit", "16-bit, 7 frames 2 EV apart (OpenCV and colour-hdri take 8-bit only: "
-                     "hdrio alone)"))
+                     "hdrio alone)"),
+          ("camera", "Camera-like: raw clip, white balance and a real camera's colour matrix "
+                     "(4 cameras x 2 noise levels), EMoR mean curve, 7 frames 2 EV apart"))
 DEFAULT = "hdrio default"
 NOISE_ORACLE = "oracle noise-aware"
+CLIP_ORACLE = "oracle (clipped observations)"
 
 
 def ok_rows(rows: Iterable[dict], **where: object) -> list[dict]:
@@ -185,6 +188,29 @@ def oracle_ratios(rows: list[dict], methods: list[str], reference: str) -> list[
     return lines + [""]
 
 
+def transition_table(rows: list[dict], methods: list[str]) -> list[str]:
+    """Camera-like stacks: each method's hue error on clip-transition pixels against the
+    clipped-observation oracle's, stack by stack (:mod:`benchmarks.truth.camera`)."""
+    oracle = {r["stack"]: r["transition"] for r in ok_rows(rows, method=CLIP_ORACLE)
+              if r.get("transition", {}).get("hue_p99")}
+    lines = ["Hue angle error (degrees) on clip-transition pixels; *ratio*: a stack's p99 "
+             f"over the {CLIP_ORACLE}'s on the same stack.", "",
+             "| method | stacks | median p99 | max p99 | median ratio | max ratio | "
+             "radiance median % |", "|---|---|---|---|---|---|---|"]
+    for name in methods:
+        mine = [r for r in ok_rows(rows, method=name) if r["stack"] in oracle
+                and r.get("transition", {}).get("hue_p99") is not None]
+        if not mine:
+            continue
+        p99 = [r["transition"]["hue_p99"] for r in mine]
+        ratios = [r["transition"]["hue_p99"] / oracle[r["stack"]]["hue_p99"] for r in mine]
+        median = _median(_values(mine, lambda r: r["transition"]["median"]))
+        lines.append(f"| {name} | {len(mine)} | {statistics.median(p99):.2f} | "
+                     f"{max(p99):.2f} | {statistics.median(ratios):.2f} | {max(ratios):.2f} | "
+                     f"{_pct(median)} |")
+    return lines + [""]
+
+
 def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
     rows, env, config = results["rows"], results["environment"], results["config"]
     methods = [m["name"] for m in results["methods"]]
@@ -216,6 +242,8 @@ def markdown(results: dict, command: str = "python -m benchmarks.truth") -> str:
             continue
         out += [f"### {title}", "", region_shares(subset), ""]
         out += summary_table(subset, methods) + [""]
+        if group == "camera":
+            out += transition_table(subset, methods)
         match = head_to_head(subset, peers)
         if match:
             worst = match["worst"]

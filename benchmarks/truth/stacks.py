@@ -39,7 +39,11 @@ class StackSpec:
         8-bit codes round-tripped through JPEG at :data:`JPEG_QUALITY`.
     group
         Which part of the design the stack belongs to (``core``, ``ladder``, ``jpeg``,
-        ``16-bit``), for the report.
+        ``16-bit``, ``camera``), for the report.
+    camera, noise
+        Rendered through that camera's raw clip, white balance and colour matrix
+        (:data:`benchmarks.truth.camera.CAMERAS`) at that noise level
+        (:data:`benchmarks.truth.camera.NOISE_LEVELS`); ``""``: the plain renderer.
     """
 
     scene: str
@@ -49,11 +53,14 @@ class StackSpec:
     bits: int = 8
     jpeg: bool = False
     group: str = "core"
+    camera: str = ""
+    noise: str = ""
 
     @property
     def key(self) -> str:
         encoding = "jpeg" if self.jpeg else f"{self.bits}bit"
-        return f"{self.scene}/{self.curve}/{self.frames}x{self.ev:g}EV/{encoding}"
+        key = f"{self.scene}/{self.curve}/{self.frames}x{self.ev:g}EV/{encoding}"
+        return f"{key}/{self.camera}/{self.noise}" if self.camera else key
 
     @property
     def encoding(self) -> str:
@@ -70,13 +77,15 @@ class StackSpec:
 
 @dataclass(frozen=True)
 class Stack:
-    """A rendered stack: codes ``(P, H, W, 3)`` (RGB, sorted by exposure), times in seconds."""
+    """A rendered stack: codes ``(P, H, W, 3)`` (RGB, sorted by exposure), times in seconds;
+    ``clipped`` ``(P, H, W, 3)``, the observations a camera-like stack clipped in raw."""
 
     spec: StackSpec
     codes: np.ndarray
     times: np.ndarray
     truth: np.ndarray
     curve: Curve
+    clipped: np.ndarray | None = None
 
     @property
     def code_max(self) -> int:
@@ -116,10 +125,17 @@ def jpeg_round_trip(codes: np.ndarray, quality: int = JPEG_QUALITY) -> np.ndarra
 
 
 def render_stack(spec: StackSpec, scene: Scene, curve: Curve) -> Stack:
-    """Render ``spec`` with :func:`hdrio.tools.synthetic.render_brackets` (shot and read noise)."""
+    """Render ``spec`` with :func:`hdrio.tools.synthetic.render_brackets` (shot and read noise),
+    or through its camera (:func:`benchmarks.truth.camera.render_camera_stack`)."""
     if spec.jpeg and spec.bits != 8:
         raise ValueError("JPEG stacks are 8-bit")
     times = exposure_ladder(scene, spec.frames, spec.ev)
+    if spec.camera:
+        from benchmarks.truth.camera import render_camera_stack
+
+        codes, clipped = render_camera_stack(scene.radiance, times, curve.response,
+                                             spec.camera, spec.noise, spec.seed)
+        return Stack(spec, codes, times, scene.radiance, curve, clipped)
     codes = render_brackets(scene.radiance, times, curve.response, bit_depth=spec.bits,
                             shot_noise=SHOT_NOISE, read_noise=READ_NOISE, seed=spec.seed)
     if spec.jpeg:

@@ -30,6 +30,7 @@ from hdrio.align.comparametric import bounds, comparametric_correction
 from hdrio.io.staging import is_staged, release
 from hdrio.jit import INNER
 from hdrio.parallel import on_threads
+from hdrio.radiometry.cliptest import dropped_channels
 from hdrio.skips import well_exposed_codes
 
 CAP = 100.0
@@ -164,7 +165,8 @@ def _near(codes, j, y, x, black, high, radius, known):  # pragma: no cover - com
 
 
 @njit(cache=True, nogil=True)
-def _consistency(start, stop, codes, tables, rules, todo, tallies):  # pragma: no cover
+def _consistency(start, stop, codes, tables, clip, rules, todo,
+                 tallies):  # pragma: no cover - compiled
     """Per bracket and cell (those ``todo``, in cell rows ``start .. stop - 1``), the sum
     and count of the capped ``d^2`` of its samples.
 
@@ -193,9 +195,20 @@ def _consistency(start, stop, codes, tables, rules, todo, tallies):  # pragma: n
     row (loads only: the reads miss the cache, and the prefetcher follows a stride), then
     tested; reading every bracket at each sample in turn waited on memory at each.
 
+    An observation the merge's saturation policy drops whole (``clip``,
+    :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`;
+    :func:`hdrio.radiometry.cliptest.dropped_channels`: a clip before the camera's colour
+    matrix bent its other channels) says nothing about motion: the merge never reads it.
+    Such a bracket is passed over in the chain, and a sample whose reference's
+    observation is one is left out. (A candle's flame through a camera that mixes its
+    channels after the clip "moved", and its re-merge took the flame's hue from a bent
+    bracket: 78 degrees of hue error where the merge alone has 4.)
+
     ``tables`` (:class:`Tables`), ``rules`` (:class:`Rules`) and ``tallies``
     (:class:`Tallies`, added to) group the arrays and settings."""
     estimates, variance, dark_bound, bright_bound, bound_variance = tables
+    limits, gates, rule, neutral, clip_estimates, clip_variances, threshold = clip
+    whole = (1 << codes.shape[3]) - 1
     reference, cell, stride, cap, resampled, black, high, suspect = rules
     sums, counts, takeovers, fars = tallies
     count, height, width, channels = codes.shape
@@ -229,6 +242,11 @@ def _consistency(start, stop, codes, tables, rules, todo, tallies):  # pragma: n
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
                     sample = gathered[i]
                     i += 1
+                    if rule != 0 and dropped_channels(
+                            sample[reference], sample[max(reference - 1, 0)], 0, reference,
+                            max(reference - 1, 0), limits, gates, rule, neutral,
+                            clip_estimates, clip_variances, threshold) == whole:
+                        continue  # the reference's observation is bent by a clip
                     for k in range(count):  # not known[:] = -1: less to compile
                         known[k] = -1
                     for c in range(channels):
@@ -261,6 +279,12 @@ def _consistency(start, stop, codes, tables, rules, todo, tallies):  # pragma: n
                             bounded[c] = start_bounded[c]
                         j = reference + direction
                         while 0 <= j < count:
+                            if rule != 0 and dropped_channels(
+                                    sample[j], sample[max(j - 1, 0)], 0, j, max(j - 1, 0),
+                                    limits, gates, rule, neutral, clip_estimates,
+                                    clip_variances, threshold) == whole:
+                                j += direction  # bent by a clip: the merge drops it
+                                continue
                             total = 0.0
                             used = 0
                             far = 0
@@ -345,13 +369,15 @@ def test_tables(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray,
     return Tables(estimates, variance, *bounds(estimates, variance))
 
 
-def cell_disagreement(codes: np.ndarray, tables: Tables, reference: int, size: int,
-                      stride: int, todo: np.ndarray, resampled: bool
+def cell_disagreement(codes: np.ndarray, tables: Tables, clip: tuple, reference: int,
+                      size: int, stride: int, todo: np.ndarray, resampled: bool
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per bracket and cell of ``size`` pixels (those ``todo``, ``(rows, cols)``), on
     every ``stride``-th pixel: the mean capped ``d^2`` against ``reference``, the samples
     counted, the takeovers (:class:`Tallies`) and the fraction of samples off by more
-    than :data:`EFFECT`, each ``(P, rows, cols)``.
+    than :data:`EFFECT`, each ``(P, rows, cols)``. ``clip``: the merge's saturation
+    policy (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`), whose observations
+    dropped whole are not tested (:func:`_consistency`).
 
     Staged brackets are read a band of cell rows at a time (:data:`TEST_BANDS`), each
     band's pages given back after it, so what the test maps does not grow with the
@@ -370,8 +396,8 @@ def cell_disagreement(codes: np.ndarray, tables: Tables, reference: int, size: i
     for first in range(0, rows, band):
         last = min(rows, first + band)
         on_threads(lambda start, stop, *rest, first=first: _consistency(
-            first + start, first + stop, *rest), last - first, codes, tables, rules, todo,
-                   tallies)
+            first + start, first + stop, *rest), last - first, codes, tables, clip, rules,
+                   todo, tallies)
         release(codes, None, 0, min(height, last * size))
     counted = np.maximum(tallies.counts, 1)
     return (tallies.sums / counted, tallies.counts, tallies.takeovers,

@@ -40,6 +40,7 @@ import numpy as np
 
 from hdrio.align.comparametric import comparametric_correction, consistency_variance
 from hdrio.align.consistency import TEST_BANDS, Tables, cell_disagreement, test_tables
+from hdrio.radiometry.cliptest import untested
 
 __all__ = ["CELL", "TEST_BANDS", "Deghosting", "comparametric_correction",
            "consistency_variance", "deghost"]
@@ -170,6 +171,7 @@ class _Candidates:
 
     codes: np.ndarray
     tables: Tables
+    clip: tuple
     moving: np.ndarray
     cell: int
     resampled: bool
@@ -198,8 +200,8 @@ class _Candidates:
     def test(self, bracket: int):
         """:func:`cell_disagreement` against ``bracket`` over the moving cells."""
         if bracket not in self.tests:
-            self.tests[bracket] = cell_disagreement(self.codes, self.tables, bracket,
-                                                    self.cell, STRIDE, self.moving,
+            self.tests[bracket] = cell_disagreement(self.codes, self.tables, self.clip,
+                                                    bracket, self.cell, STRIDE, self.moving,
                                                     self.resampled)
         return self.tests[bracket]
 
@@ -245,7 +247,7 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
 def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, reference: int,
             coverage: np.ndarray | None = None, cell: int = CELL,
             threshold: float = THRESHOLD, resampled: bool = True, *,
-            excluded: np.ndarray | None = None) -> Deghosting:
+            excluded: np.ndarray | None = None, clip: tuple | None = None) -> Deghosting:
     """Keep weights for every bracket of ``codes`` (module docstring).
 
     Parameters
@@ -272,11 +274,23 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         ``(P, H, W)`` observations kept out of the merge (``--exclude-color``,
         ``--mask``), or ``None``: a cell holding one, of the bracket or of the reference,
         says nothing about motion (Memorial's blue registration borders were flagged).
+    clip
+        The merge's saturation policy as its kernels take it
+        (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`) where it says the stack
+        mixes its channels after the clip, else ``None``: an observation it drops whole
+        is not tested (:func:`hdrio.align.consistency.cell_disagreement`), a clip bent
+        every channel of it. (Where a stack does not mix, the clip test drops only gross
+        disagreements with the shorter bracket, which a mover makes too, and every
+        observation is tested: a dark mover crossing four brackets,
+        tests/test_align_hard_cases.py, kept 20x the still stack's error where those
+        observations went untested; 15x is its bound.)
     """
     import scipy.ndimage
     count, height, width, _ = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
     tables = test_tables(codes, estimates, variance, reference)
+    if clip is None:
+        clip = untested(estimates.shape[2] - 1, codes.shape[3])
     # The quick look. Its median cell says how far the noise model under-states the
     # noise (about 1 when it is right; 4.9 for frobisher's 1/8 s JPEG against its 8 s
     # with the interim model); the threshold is raised by that factor, up to
@@ -284,7 +298,7 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     stride = max(STRIDE * COARSE, int(math.sqrt(height * width / QUICK_SAMPLES)))
     size = stride * cell // STRIDE  # the fine test's samples a cell
     coarse, coarse_counts, _, _ = cell_disagreement(
-        codes, tables, reference, size, stride,
+        codes, tables, clip, reference, size, stride,
         np.ones((-(-height // size), -(-width // size)), bool), resampled)
     judged = coarse_counts >= MIN_SAMPLES
     scale = np.array([max(1.0, float(np.median(coarse[j][judged[j]]))) if judged[j].any()
@@ -299,8 +313,8 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
         keep *= coverage
     if not todo.any():  # nothing disagrees anywhere (a still stack): no fine test
         return Deghosting(keep, cell, reference, 0.0)
-    mean, counts, takeovers, far = cell_disagreement(codes, tables, reference, cell, STRIDE,
-                                                     todo, resampled)
+    mean, counts, takeovers, far = cell_disagreement(codes, tables, clip, reference, cell,
+                                                     STRIDE, todo, resampled)
     judged = counts >= MIN_SAMPLES
     if excluded is not None:
         held = _excluded_cells(excluded, cell, rows, cols)
@@ -321,7 +335,7 @@ def deghost(codes: np.ndarray, estimates: np.ndarray, variance: np.ndarray, refe
     labels, _ = scipy.ndimage.label(moving, np.ones((3, 3), bool))
     drop = np.zeros((count, rows, cols), bool)
     sources = np.full((rows, cols), -1, np.int8)
-    candidates = _Candidates(codes, tables, moving, cell, resampled)
+    candidates = _Candidates(codes, tables, clip, moving, cell, resampled)
     for label, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
         region = labels[box] == label
         every = (slice(None), *box)

@@ -123,8 +123,8 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
 def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
                  deghost_mode: str,
                  solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None,
-                 noise: NoiseModel | None = None, excluded: np.ndarray | None = None
-                 ) -> CameraResponse:
+                 noise: NoiseModel | None = None, excluded: np.ndarray | None = None,
+                 clip: tuple | None = None) -> CameraResponse:
     """Per-bracket keep weights (``motion.keep``): uncovered borders of warped brackets
     and, with ``deghost_mode`` ``auto``, observations inconsistent with the reference.
 
@@ -135,7 +135,10 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
     ``noise``: the stack's noise model (:mod:`hdrio.radiometry.noise`), which the consistency
     test reads (:func:`hdrio.align.deghost.consistency_variance`); ``excluded``: ``(P, H,
-    W)`` observations the merge leaves out (``--exclude-color``, ``--mask``)."""
+    W)`` observations the merge leaves out (``--exclude-color``, ``--mask``); ``clip``: the
+    merge's saturation policy in a stack that mixes its channels after the clip, whose
+    observations dropped whole say nothing of motion (:func:`hdrio.align.deghost.deghost`;
+    the re-solved response's test reads the same)."""
     if stack.count < 2 or (deghost_mode == "off" and not motion.warped):
         return response
     count, height, width, _ = stack.codes.shape
@@ -164,7 +167,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     motion.deghosting = deghost(
         stack.codes, linear_tables(response, stack.exposures),
         consistency_variance(response, stack.exposures, noise), reference, cells,
-        resampled=motion.warped, excluded=excluded)
+        resampled=motion.warped, excluded=excluded, clip=clip)
     if solve is not None and motion.deghosting.fraction > 0:
         dropped = motion.deghosting.keep.min(axis=0) < 1
         exclude = np.repeat(np.repeat(dropped, CELL, axis=0), CELL, axis=1)[:height, :width]
@@ -187,7 +190,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
             second = deghost(
                 stack.codes, linear_tables(solved, stack.exposures),
                 consistency_variance(solved, stack.exposures, noise), reference, cells,
-                resampled=motion.warped, excluded=excluded)
+                resampled=motion.warped, excluded=excluded,
+                clip=clip)
             if second.fraction > 0:
                 motion.deghosting, response = second, solved
             else:

@@ -172,7 +172,9 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         *([f"exposures: {inferred}"] if inferred else []),
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"
-        f" {times['response']:.2f} s",
+        + (" observations at or reaching the clip left out (the channels mix after it),"
+           if params.get("dropped") else "")
+        + f" {times['response']:.2f} s",
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_fraction:.2f} % ("
         + ("reconstructed" if result.highlights else "a neutral lower bound")

@@ -189,13 +189,13 @@ MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--saturation", ("POLICY",), "saturation", choice(*SATURATION_POLICIES),
            example=("pixel",),
            help="which observations near clipping are dropped, from their bracket and "
-                "every longer one: 'auto' (default: as 'safe' where the stack shows its "
-                "channels mixed after the clip, a camera's colour matrix or JPEG, else a "
-                "channel at its own white level alone), 'safe' (the whole observation "
-                "unless every channel is safely below its own white level, found in the "
-                "data), 'pixel' (the tutorial's: any channel at the top code) or 'channel' "
-                "(a channel at the top code alone; wrong hues where a camera mixes "
-                "channels); docs/highlights.md"),
+                "every longer one: 'auto' (default: a partly clipped observation whole "
+                "where its other channels disagree with the next shorter bracket's, else "
+                "its clipped channels alone), 'safe' (the whole observation unless every "
+                "channel is below its own white level, found in the data), 'pixel' (the "
+                "tutorial's: any channel at the top code) or 'channel' (a channel at the "
+                "top code alone; wrong hues where a camera mixes channels); "
+                "docs/highlights.md"),
     Option("--clip-mask", (), "clip_mask", flag, example=(),
            help="also write the pixels clipped in every bracket (merged to a neutral "
                 "lower bound) as the EXR channel clipped.Y, counted by hdrio check"),

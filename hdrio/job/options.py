@@ -31,9 +31,10 @@ class MergeOptions:
     # on the truth harness's core stacks median error 1.03 % against 1.25 % for the
     # tutorial's log-domain triangle-weighted mean ("log"), p99 3.4 % against 4.8 %.
     merge: str = "inverse-variance"
-    # "auto": an observation counts only where every channel is safely below its own white
-    # level when the stack shows its channels mixed after the clip (hue-true on camera
-    # JPEGs), else channel by channel (hdrio/merge/saturation.py).
+    # "auto": a partly clipped observation is dropped whole where its other channels
+    # disagree with the next shorter bracket's by more than noise (a clip before a
+    # camera's colour matrix), else its clipped channels alone (hdrio/merge/saturation.py,
+    # hdrio/radiometry/cliptest.py).
     saturation: str = "auto"
     exclude_colour: tuple[int, ...] | None = None
     # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.

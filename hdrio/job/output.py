@@ -111,9 +111,17 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
 
 def saturation_rule(statistics: MergeStatistics) -> str:
     """What the saturation policy dropped, in words (the summary, ``hdrio:saturationRule``)."""
-    if statistics.pixel_rule:
+    policy = statistics.policy
+    if policy is None or policy.rule == "channel":
+        return "channel: a channel at its limit is dropped alone"
+    if policy.rule == "pixel":
         return "pixel: an observation with any channel at its limit is dropped whole"
-    return "channel: a channel at its limit is dropped alone"
+    share = "" if policy.dropped is None else f" ({100 * policy.dropped:.0f} % of them)"
+    shortest = ("whole (the channels mix after the clip)" if policy.neutral
+                else "channel by channel")
+    return ("test: a partly clipped observation is dropped whole where its other channels "
+            f"disagree with the next shorter bracket's{share}, else its clipped channels "
+            f"alone; in the shortest bracket {shortest}")
 
 
 def exposure_text(seconds: float) -> str:

@@ -24,7 +24,7 @@ from hdrio.job.result import Progress
 from hdrio.merge.exclusion import masked_statistics, remerge_excluded
 from hdrio.merge.highlights import HighlightReport, reconstruct_highlights
 from hdrio.merge.masked import remerge_masked
-from hdrio.merge.saturation import policy_limits
+from hdrio.merge.saturation import ClipPolicy, clip_policy
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.radiometry.curve import CameraResponse
@@ -62,18 +62,24 @@ class Merged:
 
 
 def merge_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
-                noise: NoiseModel | None, say: Progress) -> Merged:
-    """The weighted mean of ``stack``'s brackets with the plan's estimator."""
+                noise: NoiseModel | None, say: Progress, *,
+                excluded: np.ndarray | None = None,
+                policy: ClipPolicy | None = None) -> Merged:
+    """The weighted mean of ``stack``'s brackets with the plan's estimator, under the
+    saturation policy decided on the observations not ``excluded`` (``(P, H, W)``:
+    ``--mask``, ``--exclude-color``; :func:`hdrio.merge.saturation.clip_policy`), or
+    ``policy`` where deghosting already decided it on the same stack, response and
+    noise."""
     options, estimator = plan.options, plan.estimator
     jit.announce(say, "merge")
     say(f"merging {stack.count} brackets ({estimator.name}, {estimator.domain} domain)")
     weights = plan.weight_tables(response, stack.channel_exposures, noise)
-    limits, pixel_rule = policy_limits(options.saturation, stack.codes, response, noise,
-                                       stack.exposures)
+    if policy is None:
+        policy = clip_policy(options.saturation, stack.codes, response, noise,
+                             stack.exposures, exclude=excluded)
     radiance, statistics = merge_brackets(
         stack, response, options.weighting, estimator.domain, options.saturation,
-        early_stop="early-stop" in plan.skips, weights=weights, limits=limits,
-        pixel_rule=pixel_rule)
+        early_stop="early-stop" in plan.skips, weights=weights, policy=policy)
     return Merged(radiance, statistics, weights, stack.count)
 
 
@@ -86,7 +92,7 @@ def remerge_exclusions(stack: ExposureStack, response: CameraResponse, merged: M
     unseen = remerge_excluded(stack.codes, stack.channel_exposures, response,
                               merged.radiance, excluded, motion_keep=motion.keep, cell=CELL,
                               weights=merged.weights, domain=plan.estimator.domain,
-                              per_channel=plan.options.saturation == "channel")
+                              policy=merged.statistics.policy)
     merged.statistics = masked_statistics(stack.codes, excluded, stack.code_max,
                                           merged.statistics)
     return unseen if unseen.any() else None
@@ -96,7 +102,7 @@ def remerge_motion(stack: ExposureStack, response: CameraResponse, merged: Merge
                    plan: MergePlan, motion: Motion, noise: NoiseModel | None) -> None:
     """Re-merge, in place, the pixels where ``motion.keep`` drops some bracket
     (:func:`hdrio.merge.masked.remerge_masked`), with the merge's own weights, domain and
-    saturation limits.
+    saturation policy.
 
     When the brackets were warped, every warped bracket's weight is also lowered where
     its resampling error outweighs its noise (:mod:`hdrio.align.resampling`; ``noise``:
@@ -106,12 +112,10 @@ def remerge_motion(stack: ExposureStack, response: CameraResponse, merged: Merge
     domain, statistics = plan.estimator.domain, merged.statistics
     terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997", domain,
                                     merged.weights)
-    per_channel = not statistics.pixel_rule
 
     def remerge(codes, keep, out, first_row=0, rows=None, factors=None):
-        remerge_masked(codes, keep, CELL, terms, estimates, stack.code_max, per_channel,
-                       domain == "log", out, statistics.limits, first_row=first_row,
-                       rows=rows, factors=factors)
+        remerge_masked(codes, keep, CELL, terms, estimates, statistics.policy,
+                       domain == "log", out, first_row=first_row, rows=rows, factors=factors)
 
     if not motion.warped:
         remerge(stack.codes, motion.keep, merged.radiance)
@@ -156,7 +160,7 @@ def highlight_stage(merged_stack: ExposureStack, response: CameraResponse, merge
         merged.radiance, merged_stack.codes[0],
         statistics.limits or (merged_stack.code_max,) * merged_stack.shape[2],
         estimate_tables(response, merged_stack.channel_exposures, "linear")[0],
-        statistics.pixel_rule, None if excluded is None else ~excluded[0])
+        statistics.policy.neutral, None if excluded is None else ~excluded[0])
 
 
 def uncertainty_stage(merged_stack: ExposureStack, response: CameraResponse, merged: Merged,
@@ -164,5 +168,4 @@ def uncertainty_stage(merged_stack: ExposureStack, response: CameraResponse, mer
     """``--uncertainty``: each pixel's predicted relative standard deviation."""
     say("predicting each pixel's uncertainty")
     return relative_uncertainty(merged_stack, response, merged.weights, noise,
-                                plan.estimator.domain,
-                                "pixel" if merged.statistics.pixel_rule else "channel")
+                                plan.estimator.domain, merged.statistics.policy)

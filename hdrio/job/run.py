@@ -71,16 +71,19 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")
     solved = response
-    response, tested = stages.deghost_stage(stack, response, motion, plan, resolve,
-                                            prepared.excluded, say)
+    response, tested, clip = stages.deghost_stage(stack, response, motion, plan, resolve,
+                                                  prepared.excluded, say)
     clock.lap("deghost")
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
     noise = stages.noise_stage(stack, response, plan, tested if response is solved else None,
                                prepared.excluded)
-    merged = merging.merge_stage(merged_stack, response, plan, noise, say)
+    excluded = prepared.excluded if merged_stack is stack else None
+    # Deghosting's policy holds where the merge sees its stack, response and noise.
+    same = response is solved and merged_stack is stack and noise is tested
+    merged = merging.merge_stage(merged_stack, response, plan, noise, say, excluded=excluded,
+                                 policy=clip if same else None)
     skipped.early_stop_fraction = merged.early_stop_fraction
     clock.lap("merge")
-    excluded = prepared.excluded if merged_stack is stack else None
     unseen, resampled = merging.remerge_stage(stack, merged_stack, response, merged, plan,
                                               excluded, motion,
                                               noise if noise is not None else tested)

@@ -33,6 +33,7 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
+from hdrio.merge.saturation import ClipPolicy, SolveFilter, clip_policy, solve_filter
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise
@@ -115,7 +116,11 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
 
 def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve:
     """The solve ``--response`` names (the linear response for camera RAW), as
-    ``solve(stack, exclude)``: alignment and deghosting re-solve with it."""
+    ``solve(stack, exclude)``: alignment and deghosting re-solve with it.
+
+    Where the stack mixes its channels after the clip, the solve is run again without
+    the observations at or reaching the clip (:func:`hdrio.merge.saturation.solve_filter`:
+    they are biased in every channel, and would bend the curve)."""
     options, filtered = plan.options, prepared.filtered
     method = "linear" if is_raw_stack(prepared.stack) else options.response
     say(f"camera response: {method}" + ("" if method == "linear"
@@ -125,10 +130,18 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve
     def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
         if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
             stack = unfiltered(stack, filtered)  # a filter's cast would bend g
-        return RESPONSE_METHODS[method](
-            stack, smoothing=options.smoothing, weighting=options.weighting,
-            sampling=options.sampling, samples=options.samples, exclude=exclude,
-            seed=options.seed, **extra)
+
+        def solved_with(dropped: SolveFilter | None = None) -> CameraResponse:
+            return RESPONSE_METHODS[method](
+                stack, smoothing=options.smoothing, weighting=options.weighting,
+                sampling=options.sampling, samples=options.samples, exclude=exclude,
+                seed=options.seed, **extra, **({"dropped": dropped} if dropped else {}))
+
+        response = solved_with()
+        if method == "linear":
+            return response
+        dropped = solve_filter(options.saturation, stack, response, exclude=exclude)
+        return response if dropped is None else solved_with(dropped)
 
     return solve
 
@@ -219,19 +232,26 @@ def stack_noise(stack: ExposureStack, response: CameraResponse,
 
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
-                  say: Progress) -> tuple[CameraResponse, NoiseModel | None]:
-    """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved without
-    them (``solve``; ``None`` under exclusions): ``(response, noise)``, ``noise`` the
-    model the consistency test read (``None`` without deghosting). ``excluded``: the
+                  say: Progress) -> tuple[CameraResponse, NoiseModel | None,
+                                          ClipPolicy | None]:
+    """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved
+    without them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``,
+    ``noise`` the model the consistency test read and ``clip`` the saturation policy it
+    was decided with (:func:`hdrio.merge.saturation.clip_policy` on the first response:
+    in a stack that mixes its channels after the clip, the observations it drops whole
+    say nothing of motion), both ``None`` without deghosting. ``excluded``: the
     observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
     noise fit and the test too."""
     if plan.deghosts:
         say("deghosting")
-    noise = None
+    noise = clip = None
     if plan.deghosts and stack.count > 1:
         noise = stack_noise(stack, response, excluded)
+        clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
+                           stack.exposures, exclude=excluded)
+    mixed = clip.kernel_args() if clip is not None and clip.neutral else None
     return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
-                        excluded), noise
+                        excluded, mixed), noise, clip
 
 
 def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,

@@ -11,10 +11,12 @@ apart in the statistics, and left out of the clipped fraction and the preview's 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from hdrio.merge.masked import remerge_masked
+from hdrio.merge.saturation import ClipPolicy
 from hdrio.merge.weighted_mean import MergeStatistics
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.tables import merge_tables
@@ -58,7 +60,7 @@ def pixel_keep(excluded: np.ndarray, motion_keep: np.ndarray | None, cell: int) 
 def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraResponse,
                      radiance: np.ndarray, excluded: np.ndarray, *,
                      motion_keep: np.ndarray | None, cell: int, weights: np.ndarray,
-                     domain: str, per_channel: bool) -> np.ndarray:
+                     domain: str, policy: ClipPolicy) -> np.ndarray:
     """Re-merge, in place in ``radiance`` ``(H, W, C)``, every pixel some bracket is
     excluded at (and those ``motion_keep`` drops); set unseen pixels to 0.
 
@@ -70,9 +72,10 @@ def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraR
         ``(P, H, W)`` bool, true where bracket ``j`` must not be used.
     motion_keep, cell
         The deghosting's keep weights on cells of ``cell`` pixels, or ``None``.
-    weights, domain, per_channel
-        The merge's weights (:meth:`hdrio.radiometry.estimators.Estimator.weight_tables`), domain
-        and saturation policy.
+    weights, domain, policy
+        The merge's weights (:meth:`hdrio.radiometry.estimators.Estimator.weight_tables`),
+        domain and saturation policy
+        (:attr:`hdrio.merge.weighted_mean.MergeStatistics.policy`).
 
     Returns
     -------
@@ -81,8 +84,7 @@ def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraR
     """
     keep = pixel_keep(excluded, motion_keep, cell)
     terms, estimates = merge_tables(response, exposures, "Debevec1997", domain, weights)
-    remerge_masked(codes, keep, 1, terms, estimates, int(response.code_max), per_channel,
-                   domain == "log", radiance)
+    remerge_masked(codes, keep, 1, terms, estimates, policy, domain == "log", radiance)
     unseen = excluded.all(axis=0)
     radiance[unseen] = 0.0
     return unseen
@@ -91,24 +93,24 @@ def remerge_excluded(codes: np.ndarray, exposures: np.ndarray, response: CameraR
 def masked_statistics(codes: np.ndarray, excluded: np.ndarray, code_max: int,
                       statistics: MergeStatistics) -> MergeStatistics:
     """``statistics`` counted over the observations not excluded: clipped everywhere is a
-    channel at ``code_max`` in the shortest bracket kept there, black everywhere code 0
-    in every channel in the longest one kept; unseen pixels are ``masked_everywhere``.
-    ``codes`` are shortest exposure first."""
+    channel at or above its limit (``statistics.limits``, else ``code_max``) in the
+    shortest bracket kept there, black everywhere code 0 in every channel in the longest
+    one kept; unseen pixels are ``masked_everywhere``. ``codes`` are shortest exposure
+    first."""
     count = codes.shape[0]
+    limits = np.asarray(statistics.limits or (code_max,) * codes.shape[-1])
     clipped = np.zeros(excluded.shape[1:], bool)
     black = np.zeros_like(clipped)
     found = np.zeros_like(clipped)
     for j in range(count):  # shortest kept bracket first
         here = ~found & ~excluded[j]
-        clipped |= here & np.any(codes[j] == code_max, axis=-1)
+        clipped |= here & np.any(codes[j] >= limits, axis=-1)
         found |= here
     found[:] = False
     for j in range(count - 1, -1, -1):  # longest kept bracket first
         here = ~found & ~excluded[j]
         black |= here & np.all(codes[j] == 0, axis=-1)
         found |= here
-    return MergeStatistics(
-        pixels=statistics.pixels, clipped_everywhere=int(np.count_nonzero(clipped)),
-        black_everywhere=int(np.count_nonzero(black)),
-        observations_skipped=statistics.observations_skipped,
-        masked_everywhere=int(np.count_nonzero(~found)))
+    return replace(statistics, clipped_everywhere=int(np.count_nonzero(clipped)),
+                   black_everywhere=int(np.count_nonzero(black)),
+                   masked_everywhere=int(np.count_nonzero(~found)))

@@ -4,9 +4,10 @@ A pixel with a channel at or above its limit even in the shortest bracket
 (:func:`hdrio.merge.weighted_mean.clipped_everywhere_mask`) has no measurement of that
 channel, only a lower bound. ``clip`` (the default) leaves the merge's value: the
 channel's own lower bound per channel, or a neutral lower bound (every channel the
-largest of the shortest bracket's estimates) under the pixel rule or where every channel
-is clipped (:func:`hdrio.merge.kernel.merge_kernel`). A coloured light source whose one
-or two channels clip in every bracket then comes out too pale (the clipped channel too
+largest of the shortest bracket's estimates) where the saturation policy drops the
+shortest bracket's partly clipped observations whole or every channel is clipped
+(:func:`hdrio.merge.kernel.merge_kernel`). A coloured light source whose one or two
+channels clip in every bracket then comes out too pale (the clipped channel too
 low against the others) or white.
 
 ``reconstruct`` estimates the clipped channels from the unclipped ones and the
@@ -23,12 +24,12 @@ neighbours' colour, after darktable's *inpaint opposed* highlight reconstruction
    Per-channel rule: its unclipped channels keep their measurements ``m_u`` and each
    clipped channel ``k`` becomes the value the ring's ratios predict,
    ``rho_k * sum(m_u) / sum(rho_u)``, when that is above the merge's value (a clipped
-   channel is only raised). Pixel rule (the stack mixes its channels after the clip, so
-   a partly clipped pixel's other channels are biased too): the whole pixel takes the
+   channel is only raised). Neutral (the stack mixes its channels after the clip, so a
+   partly clipped pixel's other channels are biased too): the whole pixel takes the
    ring's colour ``rho * sum(m_u) / sum(rho_u)``, ``m_u`` the shortest bracket's own
    estimates (which the neutral bound had replaced), scaled up where a clipped channel
    would fall below ``f^-1(limit) / dt``, the least its clip implies (the neutral bound
-   comes from codes above the limit, the shoulder the policy dropped as unreliable).
+   comes from codes above the limit, the margin the policy dropped as unreliable).
 3. A **fully clipped** pixel takes the chromaticity of the ring around its own fully
    clipped region (where the partly clipped pixels are already reconstructed), scaled
    so that its channel mean is no lower than the merge's neutral bound and no channel
@@ -157,7 +158,7 @@ def border_chromaticity(values: np.ndarray, mask: np.ndarray,
 
 
 def reconstruct_highlights(radiance: np.ndarray, shortest: np.ndarray, limits,
-                           estimates: np.ndarray, pixel_rule: bool,
+                           estimates: np.ndarray, neutral: bool,
                            seen: np.ndarray | None = None) -> HighlightReport | None:
     """Reconstruct the channels clipped in every bracket, in place (see the module).
 
@@ -173,9 +174,11 @@ def reconstruct_highlights(radiance: np.ndarray, shortest: np.ndarray, limits,
     estimates : ndarray, (code_max + 1, C)
         The shortest bracket's radiance estimate of each code, ``f^-1(z) / dt`` (relative
         units): the measurement of a channel below its limit.
-    pixel_rule : bool
-        Whether the merge dropped whole observations (then its partly clipped pixels hold
-        the neutral bound, and their unclipped channels are read from ``estimates``).
+    neutral : bool
+        Whether the merge dropped the shortest bracket's partly clipped observations
+        whole (:attr:`hdrio.merge.saturation.ClipPolicy.neutral`: then its partly
+        clipped pixels hold the neutral bound, and their unclipped channels are read from
+        ``estimates``).
     seen : ndarray of bool, (H, W), optional
         Pixels taken from the shortest bracket (not excluded from it); others are left.
 
@@ -200,14 +203,14 @@ def reconstruct_highlights(radiance: np.ndarray, shortest: np.ndarray, limits,
         region = any_clipped[box] & own
         usable = ~any_clipped[box] if seen is None else ~any_clipped[box] & seen[box]
         counts += _reconstruct_box(radiance[box], shortest[box], limits, region, usable,
-                                   bound, estimates, pixel_rule)
+                                   bound, estimates, neutral)
     return HighlightReport(partly=int(counts[0]), fully=int(counts[1]),
                            regions=int(counts[2]), pixels=int(any_clipped.size))
 
 
 def _reconstruct_box(crop: np.ndarray, codes: np.ndarray, limits: np.ndarray,
                      region: np.ndarray, usable: np.ndarray, bound: np.ndarray,
-                     estimates: np.ndarray, pixel_rule: bool) -> tuple[int, int, int]:
+                     estimates: np.ndarray, neutral: bool) -> tuple[int, int, int]:
     """:func:`reconstruct_highlights` on one box (:func:`clip_groups`): ``crop`` ``(h, w,
     C)`` radiance changed in place at ``region``'s pixels, from ``usable`` pixels'
     colour; ``codes`` the shortest bracket's there. Returns the counts of partly and
@@ -224,16 +227,16 @@ def _reconstruct_box(crop: np.ndarray, codes: np.ndarray, limits: np.ndarray,
     partly_codes = codes[partly]
     lost = partly_codes >= limits
     measured = today
-    if pixel_rule:  # the neutral bound replaced the unclipped channels' measurements
+    if neutral:  # the neutral bound replaced the unclipped channels' measurements
         measured = estimates[partly_codes, np.arange(channels)]
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = (np.where(lost, 0, measured).sum(-1)
                  / np.where(lost, 0, rho).sum(-1))[:, None]
-        if pixel_rule:  # the whole pixel in the ring's colour, no channel below its bound
+        if neutral:  # the whole pixel in the ring's colour, no channel below its bound
             scale = np.maximum(scale, np.where(lost, bound / rho, 0).max(-1, keepdims=True))
         predicted = rho * scale
     fine = np.isfinite(predicted).all(axis=-1, keepdims=True)
-    raised = predicted if pixel_rule else np.where(lost, np.maximum(today, predicted),
+    raised = predicted if neutral else np.where(lost, np.maximum(today, predicted),
                                                    measured)
     crop[partly] = np.minimum(np.where(fine, raised, today), np.finfo(np.float32).max)
     # Stage 2: fully clipped pixels take their border's colour (the partly clipped ones'

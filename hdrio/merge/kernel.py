@@ -13,7 +13,7 @@ The two sums of a value travel together as one complex64, ``numerator + i
 denominator``, and so do the tables' terms ``w(z) x_j(z) + i w(z)``.
 
 Saturation (a code at or above its channel's *limit*: ``Z_max``, or lower where
-:mod:`hdrio.merge.saturation` found the white level or its shoulder below it) drops the
+:mod:`hdrio.merge.saturation` found the white level, less the noise margin, below it) drops the
 observation from its bracket and from every longer one. The kernel walks the brackets
 longest first and *resets* a channel's sums where it meets a dropped code: ``sum = (sum
 + term[z]) * (z < limit)``. What survives is exactly the sum over the brackets shorter
@@ -21,10 +21,13 @@ than the first dropped one, with no per-channel state and no data-dependent bran
 the terms 0 from the limit up that is ``sum * (z < limit) + term[z]``, a fused
 multiply-add.
 
-**The pixel rule** (any dropped channel drops the whole observation: the tutorial's
-``pixel`` and the ``safe`` policy) is applied by remapping each bracket's row before it
-is summed, into a per-task buffer: every code of a pixel with a dropped channel becomes
-``Z_max``, and the per-channel resets then apply it.
+**Whole observations** (the pixel rule: any dropped channel drops the whole observation,
+the tutorial's ``pixel`` and the ``safe`` policy; the clip test of ``auto``, which drops
+a partly clipped observation whole where its other channels disagree with the next
+shorter bracket's, :mod:`hdrio.radiometry.cliptest`) are dropped by remapping each bracket's
+row before it is summed, into a per-task buffer: every code of such an observation
+becomes ``Z_max``. The per-channel resets then apply it, through the same pair tables
+(the tutorial's per-pixel policy used to take one look-up per code instead).
 
 **Pair tables** (8-bit codes, three channels: the common case; :mod:`hdrio.merge.row_sums`).
 Two brackets ``j`` (longer) and ``j - 1`` are looked up together: one table per pair and
@@ -74,6 +77,7 @@ from hdrio.merge.row_sums import (
     accumulate_by_pairs,
 )
 from hdrio.parallel import on_threads
+from hdrio.radiometry.cliptest import dropped_channels
 
 MAX_BRACKETS = 64
 """Brackets one merge takes (more is never a real bracket set)."""
@@ -149,70 +153,78 @@ def _finish(sums, row, log_domain, scale):  # pragma: no cover - compiled
 
 
 @njit(**INLINED)
-def _unsafe(row, x, c, channels, limits, pixel_rule):  # pragma: no cover - compiled
-    """Whether channel ``c`` of pixel ``x`` in ``row`` is dropped: its code at or above
-    its limit, or (``pixel_rule``) any channel's."""
-    if not pixel_rule:
-        return row[x * channels + c] >= limits[c]
-    for k in range(channels):
-        if row[x * channels + k] >= limits[k]:
-            return True
-    return False
-
-
-@njit(**INLINED)
-def _fallback(codes, y, x, c, channels, limits, pixel_rule,
+def _fallback(codes, source, row, y, stop, x, c, limits,
               estimates):  # pragma: no cover - compiled
     """The estimate of the longest bracket channel ``c`` of pixel ``x`` was not dropped
-    from. Dropped even from the shortest bracket (clipped everywhere): a neutral lower
-    bound, the largest of the shortest bracket's estimates over the pixel's channels
-    (every channel the same, so no colour cast), when the pixel rule dropped it or
-    every channel is clipped; else the channel's own estimate there."""
+    from (``source[:stop, row]``: row ``y``'s codes as :func:`_policy_rows` gave them
+    to the sums, every channel the policy dropped at ``Z_max``; bracket ``stop``, where
+    there is one, is saturated across the row). Dropped even from the shortest bracket
+    (clipped everywhere): a neutral lower bound, the largest of the shortest bracket's
+    estimates over the pixel's channels (every channel the same, so no colour cast),
+    when the policy dropped the whole observation or every channel is clipped; else the
+    channel's own estimate there.
+
+    The policy's drops are read from ``source``, not tested again, and the policy itself
+    is not passed: a tuple of arrays handed to a function called for every channel
+    left without weight (16 % of a dark stack's) costs an atomic reference count per
+    array and call, which the threads then contend for (6 s of a 24 MP merge)."""
+    channels = limits.size
+    base = x * channels
     kept = 0
-    while kept < codes.shape[0] and not _unsafe(codes[kept, y], x, c, channels, limits,
-                                                pixel_rule):
+    while kept < stop and source[kept, row][base + c] < limits[c]:
         kept += 1
     if kept > 0:
-        return estimates[kept - 1, c, codes[kept - 1, y][x * channels + c]]
-    row = codes[0, y]
+        return estimates[kept - 1, c, codes[kept - 1, y][base + c]]
+    shortest = codes[0, y]
     every = True
     for k in range(channels):
-        every &= row[x * channels + k] >= limits[k]
-    if not (pixel_rule or every):
-        return estimates[0, c, row[x * channels + c]]
-    value = estimates[0, 0, row[x * channels]]
+        every &= source[0, row][base + k] >= limits[k]
+    if not every:
+        return estimates[0, c, shortest[base + c]]
+    value = estimates[0, 0, shortest[base]]
     for k in range(1, channels):
-        value = max(value, estimates[0, k, row[x * channels + k]])
+        value = max(value, estimates[0, k, shortest[base + k]])
     return value
 
 
 @njit(**INLINED)
-def _remap_row(row, out, limits, code_max, pixel_rule):  # pragma: no cover - compiled
-    """``out``: ``row``'s codes with every dropped observation set to ``Z_max`` (a code
-    at or above its channel's limit; with ``pixel_rule`` all of the pixel's channels
-    when any one is), so that the per-channel resets apply the policy."""
+def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compiled
+    """``out``: bracket ``j``'s row ``y`` with every channel the policy drops besides its
+    limit's (:func:`hdrio.radiometry.cliptest.dropped_channels`: every channel of an
+    observation dropped whole) set to ``Z_max``, so that the per-channel resets apply
+    the policy (a channel at or above its limit they drop themselves). The pixel rule
+    in one pass written so that it vectorises; the clip test copies the row and tests
+    only the observations with a channel at or above its gate."""
+    limits, gates, rule, neutral, estimates, variances, threshold = policy
     channels = limits.size
+    row = codes[j, y]
     top = row.dtype.type(code_max)
-    if channels == 3:
+    if channels == 3 and rule == 1:
         l0, l1, l2 = limits[0], limits[1], limits[2]
-        for x in range(row.size // 3):  # written so that it vectorises
+        for x in range(row.size // 3):
             i = 3 * x
             z0, z1, z2 = row[i], row[i + 1], row[i + 2]
-            u0, u1, u2 = z0 >= l0, z1 >= l1, z2 >= l2
-            if pixel_rule:
-                u0 = u1 = u2 = u0 | u1 | u2
-            out[i] = top if u0 else z0
-            out[i + 1] = top if u1 else z1
-            out[i + 2] = top if u2 else z2
+            u = (z0 >= l0) | (z1 >= l1) | (z2 >= l2)
+            out[i] = top if u else z0
+            out[i + 1] = top if u else z1
+            out[i + 2] = top if u else z2
         return
+    out[:] = row
+    if rule == 0:
+        return
+    shorter = codes[max(j - 1, 0), y]
     for x in range(row.size // channels):
-        any_unsafe = False
+        base = x * channels
+        near = False
+        for k in range(channels):
+            near |= row[base + k] >= gates[k]
+        if not near:
+            continue
+        dropped = dropped_channels(row, shorter, base, j, max(j - 1, 0), limits, gates,
+                                    rule, neutral, estimates, variances, threshold)
         for c in range(channels):
-            any_unsafe |= row[x * channels + c] >= limits[c]
-        for c in range(channels):
-            z = row[x * channels + c]
-            out[x * channels + c] = top if (z >= limits[c] or (pixel_rule and any_unsafe)) \
-                else z
+            if (dropped >> c) & 1:
+                out[base + c] = top
 
 
 @njit(**INLINED)
@@ -254,44 +266,43 @@ def _early_stop(codes, y, code_max, early_stop):  # pragma: no cover - compiled
 
 
 @njit(**INLINED)
-def _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule
-                 ):  # pragma: no cover - compiled
+def _policy_rows(codes, y, stop, remapped, policy, code_max):  # pragma: no cover - compiled
     """The rows to sum for row ``y``: ``codes`` itself and ``y``, or (when ``remapped``
     has room) its brackets below ``stop`` remapped by the saturation policy
     (:func:`_remap_row`) and row 0 of ``remapped``."""
     if remapped.shape[0] == 0:
         return codes, y
     for j in range(stop):
-        _remap_row(codes[j, y], remapped[j, 0], limits, code_max, pixel_rule)
+        _remap_row(codes, j, y, remapped[j, 0], policy, code_max)
     return remapped, 0
 
 
 @njit(**INLINED)
-def _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
+def _finish_row(codes, source, row, y, stop, sums, scale, estimates, limits, log_domain,
                 out, clipped_rows, black_rows, skipped_rows):  # pragma: no cover - compiled
-    """Row ``y``'s result from its sums (the fallback where no weight is left) and its
-    statistics."""
+    """Row ``y``'s result from its sums (the fallback where no weight is left, from the
+    rows summed, ``source[:stop, row]``) and its statistics."""
     count = codes.shape[0]
     channels = estimates.shape[1]
     n = out.shape[1]
-    row = out[y]
-    if _finish(sums, row, log_domain, scale):
+    result = out[y]
+    if _finish(sums, result, log_domain, scale):
         for i in range(n):
             if sums[i].imag <= 0.0:
-                value = _fallback(codes, y, i // channels, i % channels, channels, limits,
-                                  pixel_rule, estimates)
+                value = _fallback(codes, source, row, y, stop, i // channels, i % channels,
+                                  limits, estimates)
                 if log_domain:
                     value = math.exp(min(max(value, LOG_FLOAT32_TINY), LOG_FLOAT32_MAX))
-                row[i] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
+                result[i] = min(max(value, FLOAT32_TINY), FLOAT32_MAX)
     skipped_rows[y] = (count - stop) * (n // channels)
     clipped_rows[y], black_rows[y] = _clipped_and_black(codes[0, y], codes[count - 1, y],
                                                         limits, channels)
 
 
 @njit(**KERNEL)
-def merge_rows_by_pairs(first, last, codes, top, pairs, estimates, code_max, limits,
-                        pixel_rule, remap, log_domain, early_stop, out, clipped_rows,
-                        black_rows, skipped_rows):  # pragma: no cover - compiled
+def merge_rows_by_pairs(first, last, codes, top, pairs, estimates, code_max, policy, remap,
+                        log_domain, early_stop, out, clipped_rows, black_rows,
+                        skipped_rows):  # pragma: no cover - compiled
     """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s pair-table path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)  # numerator + i denominator
@@ -300,16 +311,16 @@ def merge_rows_by_pairs(first, last, codes, top, pairs, estimates, code_max, lim
     remapped = np.empty((codes.shape[0] if remap else 0, 1, n), codes.dtype)
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
-        source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
-        accumulate_by_pairs(source, row, stop, pairs, zeros, limits, sums)
-        _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
-                    out, clipped_rows, black_rows, skipped_rows)
+        source, row = _policy_rows(codes, y, stop, remapped, policy, code_max)
+        accumulate_by_pairs(source, row, stop, pairs, zeros, policy[0], sums)
+        _finish_row(codes, source, row, y, stop, sums, scale, estimates, policy[0],
+                    log_domain, out, clipped_rows, black_rows, skipped_rows)
 
 
 @njit(**KERNEL)
-def merge_rows_by_brackets(first, last, codes, top, terms, estimates, code_max, limits,
-                           pixel_rule, remap, log_domain, early_stop, out, clipped_rows,
-                           black_rows, skipped_rows):  # pragma: no cover - compiled
+def merge_rows_by_brackets(first, last, codes, top, terms, estimates, code_max, policy,
+                           remap, log_domain, early_stop, out, clipped_rows, black_rows,
+                           skipped_rows):  # pragma: no cover - compiled
     """Rows ``top + first .. top + last - 1`` by :func:`merge_kernel`'s general path."""
     n = out.shape[1]
     sums = np.empty(n, np.complex64)
@@ -317,10 +328,10 @@ def merge_rows_by_brackets(first, last, codes, top, terms, estimates, code_max, 
     remapped = np.empty((codes.shape[0] if remap else 0, 1, n), codes.dtype)
     for y in range(top + first, top + last):
         stop = _early_stop(codes, y, code_max, early_stop)
-        source, row = _policy_rows(codes, y, stop, remapped, limits, code_max, pixel_rule)
-        accumulate_by_brackets(source, row, stop, terms, limits, sums)
-        _finish_row(codes, y, stop, sums, scale, estimates, limits, pixel_rule, log_domain,
-                    out, clipped_rows, black_rows, skipped_rows)
+        source, row = _policy_rows(codes, y, stop, remapped, policy, code_max)
+        accumulate_by_brackets(source, row, stop, terms, policy[0], sums)
+        _finish_row(codes, source, row, y, stop, sums, scale, estimates, policy[0],
+                    log_domain, out, clipped_rows, black_rows, skipped_rows)
 
 
 @dataclass(frozen=True)
@@ -340,13 +351,14 @@ class KernelTables:
         codes), or empty for the general path.
     code_max
         The top code.
-    limits
-        ``(C,)`` int64: the first code of each channel that is dropped (``code_max``
-        drops the top code only), applied by the resets.
-    pixel_rule
-        A dropped channel drops the whole observation (every channel of that pixel in
-        that bracket), for which each bracket's row is first remapped
-        (:func:`_remap_row`, into a per-task buffer).
+    policy
+        The saturation policy as the compiled kernels take it
+        (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`): ``limits`` ``(C,)``
+        int64, the first code of each channel that is dropped (``code_max`` drops the top
+        code only), applied by the resets, and the observations it drops whole
+        (:func:`hdrio.radiometry.cliptest.dropped_channels`: the pixel rule, or the clip
+        test), for which each bracket's row is first remapped (:func:`_remap_row`, into a
+        per-task buffer).
     log_domain
         Average ``ln E`` (then exponentiate) rather than ``E``.
     early_stop
@@ -358,8 +370,7 @@ class KernelTables:
     estimates: np.ndarray
     pairs: np.ndarray
     code_max: int
-    limits: np.ndarray
-    pixel_rule: bool
+    policy: tuple
     log_domain: bool
     early_stop: bool
 
@@ -379,10 +390,10 @@ def merge_kernel(codes: np.ndarray, top: int, bottom: int, tables: KernelTables,
     less to compile than numba's ``parallel=True``, for the same speed.
     """
     t = tables
-    remap = bool(t.pixel_rule)
+    remap = int(t.policy[2]) != 0
     if t.pairs.shape[0] == codes.shape[0]:
         kernel, lookups = merge_rows_by_pairs, t.pairs
     else:
         kernel, lookups = merge_rows_by_brackets, t.terms
-    on_threads(kernel, bottom - top, codes, top, lookups, t.estimates, t.code_max, t.limits,
-               t.pixel_rule, remap, t.log_domain, t.early_stop, out, *counts)
+    on_threads(kernel, bottom - top, codes, top, lookups, t.estimates, t.code_max, t.policy,
+               remap, t.log_domain, t.early_stop, out, *counts)

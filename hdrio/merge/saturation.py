@@ -10,24 +10,27 @@ clipped cloud's edge). On brackets rendered through such a camera
 on clip-transition pixels reaches p99 90 degrees with ``channel``.
 
 ``auto`` (the default)
-    ``safe`` where the stack shows its channels mixed after the clip
-    (:func:`channel_mixing` inside clips, :func:`clip_interior`: a partly clipped
-    observation's unclipped channels disagree with the shorter bracket's), else per
-    channel (as ``channel``) at the white levels less the noise margin. On the truth
-    harness's renders (no mixing) the pixel rule costs accuracy for nothing: their
-    channels are right to keep (JPEG stacks' median error 3.93 % per channel, 4.24 %
-    with the pixel rule and the shoulders; ``python -m benchmarks.truth --group jpeg``).
+    each observation near the clip (a channel at or above its gate, another below its
+    limit) is tested against the next shorter bracket (:mod:`hdrio.radiometry.cliptest`): dropped
+    whole where its other channels disagree with it by more than noise (by more,
+    where the stack does not show its channels mixed after the clip), else its clipped
+    channels alone. In the shortest bracket, which has nothing to be tested
+    against, whole where the stack shows its channels mixed after the clip
+    (:func:`~hdrio.merge.clipping.channel_mixing` inside clips,
+    :func:`~hdrio.merge.clipping.clip_interior`), else channel by channel.
 ``safe``
     an observation (one bracket at one pixel) counts only where *every* channel is
-    safely below clipping: below its own white level, found in the data
-    (:func:`white_levels`), by more than the noise model's margin (the shoulder,
-    :func:`saturation_limits`). Otherwise the whole observation is dropped, from its
-    bracket and every longer one (as the others).
+    below its limit; otherwise the whole observation is dropped.
 ``pixel`` (the tutorial's ``hdr.m``)
     any channel at ``Z_max`` drops the observation.
 ``channel``
     a channel at ``Z_max`` drops that channel alone: right only for a camera that does
     not mix its channels after the clip (the truth harness's renders).
+
+A channel's *limit* (``auto``, ``safe``) is its white level, the code its clipped
+observations pile up at (:func:`~hdrio.merge.clipping.white_levels`), less the noise
+model's margin (:func:`~hdrio.merge.clipping.saturation_limits`). Whatever the policy, a
+dropped observation is dropped from its bracket and every longer one.
 
 Pixels dropped even from the shortest bracket (clipped in every bracket) take a neutral
 lower bound in the kernel (:func:`hdrio.merge.kernel.merge_kernel`): every channel the
@@ -38,285 +41,278 @@ neighbours' colour instead.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields, is_dataclass, replace
+
 import numpy as np
 
+from hdrio.merge.clipping import (
+    MIXING_GRID_LIMIT,
+    channel_mixing,
+    clip_gates,
+    clip_interior,
+    saturation_limits,
+    test_spreads,
+    unexcluded,
+)
+from hdrio.radiometry.cliptest import (
+    APART_SIGMAS,
+    CLIP_SIGMAS,
+    RULES,
+    ClipTables,
+    clip_tables,
+    dropped_observations,
+)
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.radiometry.noise import NoiseModel
-from hdrio.radiometry.noise_fit import noise_grid
+from hdrio.radiometry.noise import NoiseModel, noise_encoding
+from hdrio.radiometry.noise_fit import fit_noise, noise_grid
+from hdrio.stack import ExposureStack
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")
 
-_PILE_UP = 8.0  # a white level's count is this many times its neighbours' median
-_TOP_FRACTION = 0.75  # white levels are looked for above this fraction of the code range
-_MIN_PILE_FRACTION = 1e-3  # and must hold this fraction of the sampled observations
-_MARGIN_SIGMAS = 2.0  # the shoulder: codes within this many sigmas of the white level
-_MIXING_SHIFT = 1.0  # partly clipped observations this many spreads off show mixing
-_MIXING_COUNT = 50  # observations needed to say so
-_SPREAD_FLOOR = 0.01  # the least spread (ln E): codes' rounding, 16-bit data
-_INTERIOR_RADIUS = 4  # pixels: partly clipped evidence only where the clip extends this far
-MIXING_GRID_LIMIT = 2**16  # pixels sampled for the white levels and the mixing test
-_MID = (0.1,)  # the least code (fraction of Z_max) of the channels compared
-_BASELINE = (0.25, 0.65)  # codes (fractions of Z_max) whose ln ratio is the reference
-_SHOULDER_FROM = 0.7  # shoulders are looked for above this fraction of the range
-_SHOULDER_BIAS = 0.10  # a bin of codes off by more than this (ln E) is in the shoulder
-_SHOULDER_COUNT = 20  # observations a bin needs
+MIXING_SHIFT = 0.9
+"""Spreads (:func:`hdrio.merge.clipping.channel_mixing`, inside clips) above which a stack
+shows its channels mixed after the clip. Stacks that keep their channels apart measure
+at most 0.41 (the truth harness's renders), memorial 0.39, canal (``alignment/``) 0.36,
+but 0.83 once warped (the response's re-solve after alignment: resampling blends a
+clip's edge), ``ghost/`` 0; the camera-like stacks (a real camera's matrix after the raw
+clip) 0.93 to 111, but for CandleGlass's small glints and Desk through the D700 at
+sensor noise (0.38-0.81), which say too little either way. At 1.0, CandleGlass through
+the D700 and the ILCE-7 at low noise (0.93, 0.999) were tested as unmixed and their hue
+error's p99 was 1.62x and 1.54x the clipped-observation oracle's; at 0.9, 0.99x and
+0.97x. At 0.7 canal's warped re-solve left out its observations at the clip and its sky
+edges' fringe grew from 12 pixels to 22 (tests/test_merge_cliptest.py)."""
 
+@dataclass(frozen=True)
+class ClipPolicy:
+    """What the merge drops near the clip, decided once from the stack (:func:`clip_policy`)
+    and applied by every kernel that merges (:mod:`hdrio.merge.kernel`,
+    :mod:`hdrio.merge.masked`, :mod:`hdrio.merge.uncertainty`) and by the Blender node.
 
-def white_levels(grid: np.ndarray, code_max: int) -> np.ndarray:
-    """Each channel's white level (code), ``(C,)`` int64, from sampled codes ``(P, n, C)``.
-
-    A clipped channel piles up at one code: ``Z_max`` for most files, lower where the
-    camera's white balance scaled the raw white level below the top code. The white level
-    is ``Z_max`` when it holds at least 0.1 % of the observations; otherwise the code of
-    the largest pile-up above 75 % of the range (at least 8 times the median count of the
-    8 codes below it, and 0.1 % of the observations); otherwise ``Z_max``.
+    Attributes
+    ----------
+    limits
+        ``(C,)`` int64: the first dropped code of each channel.
+    gates
+        ``(C,)`` int64: an observation with a channel at or above its gate is *near the
+        clip*, and tested (``test``); ``limits`` when not given.
+    rule
+        ``channel`` (a channel at its limit is dropped alone), ``pixel`` (the whole
+        observation), ``test`` (whole where it fails the clip test,
+        :mod:`hdrio.radiometry.cliptest`, else the clipped channels alone).
+    neutral
+        A partly clipped observation of the shortest bracket is dropped whole, so the
+        pixel takes the neutral lower bound (the pixel rule, and ``test`` on a stack that
+        mixes its channels after the clip).
+    tables
+        The clip test's tables (``test``), else ``None``.
+    spreads
+        ``(P, C)`` (``test``): the spread of the stack's clean observations about the
+        noise model (:func:`~hdrio.merge.clipping.test_spreads`), which the test allows.
+    mixing
+        :func:`~hdrio.merge.clipping.channel_mixing` inside clips, where measured.
+    dropped
+        The share of the sampled partly clipped observations (a channel at its limit,
+        another below; brackets after the shortest) the test drops whole, where
+        measured.
     """
-    channels = grid.shape[-1]
-    levels = np.full(channels, code_max, dtype=np.int64)
-    for c in range(channels):
-        codes = grid[..., c].reshape(-1)
-        counts = np.bincount(codes, minlength=code_max + 1).astype(np.float64)
-        least = _MIN_PILE_FRACTION * codes.size
-        if counts[code_max] >= least or codes.size == 0:
-            continue
-        start = max(int(_TOP_FRACTION * code_max), 8)
-        best = 0.0
-        for z in range(start, code_max):
-            below = np.median(counts[z - 8:z])
-            if counts[z] >= least and counts[z] >= _PILE_UP * max(below, 1.0) \
-                    and counts[z] > best:
-                best, levels[c] = counts[z], z
-    return levels
+
+    limits: np.ndarray
+    gates: np.ndarray | None = None
+    rule: str = "channel"
+    neutral: bool = False
+    tables: ClipTables | None = None
+    spreads: np.ndarray | None = None
+    mixing: float | None = None
+    dropped: float | None = None
+
+    def __eq__(self, other: object) -> bool:
+        """The same decisions and tables (the arrays compared by value)."""
+        if not isinstance(other, ClipPolicy):
+            return NotImplemented
+        return _same(self, other)
+
+    __hash__ = None  # arrays inside
+
+    @classmethod
+    def at_top(cls, code_max: int, channels: int, rule: str = "channel") -> ClipPolicy:
+        """``rule`` at the top code (the tutorial's ``pixel``, and ``channel``)."""
+        return cls(np.full(channels, code_max, np.int64), rule=rule, neutral=rule == "pixel")
+
+    @property
+    def pixel_rule(self) -> bool:
+        """Every partly clipped observation is dropped whole."""
+        return self.rule == "pixel"
+
+    def for_brackets(self, response: CameraResponse, exposures, noise: NoiseModel | None
+                     ) -> ClipPolicy:
+        """The same decisions (limits, gates, rule, neutral, spreads) with the clip
+        test's tables for brackets of ``exposures`` (seconds, shortest first) through
+        ``response``: what a front end whose exposures can be edited applies (the
+        Blender node)."""
+        if self.rule != "test":
+            return self
+        sigmas = CLIP_SIGMAS if self.neutral else APART_SIGMAS
+        if noise is None:
+            noise = NoiseModel.quantisation_only(response.channels)
+        spreads = self.spreads
+        if spreads is not None and np.shape(spreads)[0] != len(exposures):
+            spreads = None  # measured on another bracket count: the noise model alone
+        return replace(self, tables=clip_tables(response, exposures, noise, sigmas),
+                       spreads=spreads)
+
+    def kernel_args(self) -> tuple:
+        """The policy as the compiled kernels take it: ``(limits, gates, rule, neutral,
+        estimates, variances, sigmas squared)``, the tables ``(1, 1, 1)`` zeros when
+        there is no test (:func:`hdrio.radiometry.cliptest.dropped_channels`)."""
+        empty = np.zeros((1, 1, 1))
+        tables = self.tables
+        limits = np.ascontiguousarray(self.limits, dtype=np.int64)
+        gates = limits if self.gates is None else np.ascontiguousarray(self.gates, np.int64)
+        thresholds = np.zeros((1, limits.size))
+        if tables is not None:
+            spreads = np.ones(tables.estimates.shape[:2]) if self.spreads is None \
+                else np.asarray(self.spreads, np.float64)
+            thresholds = np.ascontiguousarray((tables.sigmas * spreads) ** 2)
+        return (limits, gates, np.int64(RULES[self.rule]),
+                bool(self.neutral), empty if tables is None else tables.estimates,
+                empty if tables is None else tables.variances, thresholds)
 
 
-def _pairs(grid: np.ndarray, limits: np.ndarray):
-    """Each pair of neighbouring brackets of ``grid`` ``(P, n, C)``: ``(j, shorter,
-    longer, shorter safe in every channel, longer at or above a limit in some channel)``."""
-    for j in range(1, grid.shape[0]):
-        short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-        # Channel by channel: np.all(..., axis=-1) over 3 channels costs 10x more.
-        safe, clipped = short[:, 0] < limits[0], long[:, 0] >= limits[0]
-        for c in range(1, grid.shape[-1]):
-            safe &= short[:, c] < limits[c]
-            clipped |= long[:, c] >= limits[c]
-        yield j, short, long, safe, clipped
+def _same(a, b) -> bool:
+    """Whether ``a`` and ``b`` hold the same values: dataclasses field by field, arrays
+    element by element."""
+    if is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.array_equal(a, b)
+    return a == b
 
 
-def shoulders(grid: np.ndarray, response: CameraResponse, exposures,
-              limits: np.ndarray) -> np.ndarray:
-    """Where each channel's observations stop agreeing with the shorter bracket's,
-    ``(C,)`` codes (``limits`` where they agree up to it).
+class _Sample:
+    """The pixels a policy is decided on: ``full``, the noise grid of ``codes`` (every
+    pixel sampled), and ``grid``, those of them no bracket is excluded at."""
 
-    Near the top of the range a camera's codes can be off by more than noise: its
-    rendering rolls the highlights off, a raw channel clipped in a bracket pulls the
-    others through the colour matrix, or the recovered response is wrong there. For each
-    channel, observations (``grid`` ``(P, n, C)``, shortest first) whose shorter
-    neighbour is safe in every channel are compared with it (``ln`` ratio, less its
-    median over codes at 25-65 % of the range) in bins of 1/32 of the range above 70 %;
-    the shoulder is the start of the run of top bins (20 observations or more) whose
-    median is off by more than 10 %.
-    """
-    exposures = np.asarray(exposures, dtype=np.float64)
-    code_max = response.code_max
-    g = response.log_inverse
-    width = max(1, (code_max + 1) // 32)
-    mid = (int(_BASELINE[0] * code_max), int(_BASELINE[1] * code_max))
-    out = np.asarray(limits, dtype=np.int64).copy()
-    channels = grid.shape[-1]
-    values: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    codes: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    for j, short, long, safe_short, clipped_long in _pairs(grid, limits):
-        both = safe_short & ~clipped_long
-        for c in range(channels):
-            ok = both & (short[:, c] >= int(_MID[0] * code_max))
-            values[c].append((g[long[ok, c], c] - np.log(exposures[j]))
-                             - (g[short[ok, c], c] - np.log(exposures[j - 1])))
-            codes[c].append(long[ok, c])
-    for c in range(channels):
-        d, z = np.concatenate(values[c]), np.concatenate(codes[c])
-        base = d[(z >= mid[0]) & (z <= mid[1])]
-        if base.size < _SHOULDER_COUNT:
-            continue
-        d = d - np.median(base)
-        start = int(_SHOULDER_FROM * code_max) // width * width
-        shoulder = int(limits[c])
-        for low in range((int(limits[c]) - 1) // width * width, start - 1, -width):
-            inside = d[(z >= low) & (z < min(low + width, int(limits[c])))]
-            if inside.size < _SHOULDER_COUNT:
-                continue
-            if abs(float(np.median(inside))) <= _SHOULDER_BIAS:
-                break
-            shoulder = low
-        out[c] = min(out[c], shoulder)
-    return out
+    def __init__(self, codes: np.ndarray, exclude: np.ndarray | None):
+        self.codes = codes
+        self.full = noise_grid(codes, MIXING_GRID_LIMIT)
+        self.seen = unexcluded(codes.shape, exclude)
+        self.grid = self.full if self.seen is None else self.full[:, self.seen]
+
+    def mixing(self, response: CameraResponse, exposures, limits) -> float:
+        """:func:`~hdrio.merge.clipping.channel_mixing` inside the sample's clips."""
+        interior = clip_interior(self.codes, limits, grid=self.full)
+        interior = interior if self.seen is None else interior[:, self.seen]
+        return channel_mixing(self.grid, response, exposures, limits, interior)
 
 
-def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseModel,
-                      grid: np.ndarray | None = None, exposures=None) -> np.ndarray:
-    """The first dropped code of each channel, ``(C,)`` int64: the white level, or lower
-    by the shoulder where the exposure ``f^-1(z)`` is within two of its own standard
-    deviations (``noise``) of the white level's, or lower still where the data disagree
-    with the shorter bracket by more than 10 % (:func:`shoulders`; when ``exposures``,
-    seconds, are given).
+def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
+                noise: NoiseModel | None, exposures=None, *,
+                exclude: np.ndarray | None = None) -> ClipPolicy:
+    """``policy`` (:data:`SATURATION_POLICIES`) decided on ``codes`` ``(P, H, W, C)``.
 
-    ``codes`` ``(P, H, W, C)``; ``grid`` the noise fit's sample (:func:`noise_grid`),
-    when already read.
-    """
-    grid = noise_grid(codes) if grid is None else grid
-    white = white_levels(grid, response.code_max)
-    X = np.exp(response.log_inverse)
-    sigma = np.sqrt(noise.exposure_variance(response))
-    limits = white.copy()
-    for c, level in enumerate(white):
-        z = int(level)
-        while z > 1 and X[level, c] - X[z - 1, c] <= _MARGIN_SIGMAS * sigma[z - 1, c]:
-            z -= 1
-        limits[c] = z
-    if exposures is not None and grid.shape[0] > 1:
-        limits = shoulders(grid, response, exposures, limits)
-    return limits
-
-
-def clip_interior(codes: np.ndarray, limits: np.ndarray, limit: int = MIXING_GRID_LIMIT,
-                  radius: int = _INTERIOR_RADIUS, grid: np.ndarray | None = None
-                  ) -> np.ndarray:
-    """``(P, n)`` booleans on the grid of :func:`noise_grid` (``codes`` ``(P, H, W, C)``,
-    at most ``limit`` pixels): true in the first bracket where the pixel has a channel at
-    or above its ``limits`` (codes), when that is not the shortest bracket and some
-    channel is still below (partly clipped), and the clip pattern (which channels are
-    at or above their limits) is the same at the 8 pixels ``radius`` away in that
-    bracket (rows, columns, diagonals; clamped at the image's edge).
-
-    A clip's edge is where a lossy codec biases the unclipped channels: JPEG's 4:2:0
-    chroma and its 8 x 8 transform blocks mix a pixel with its neighbours, so next to a
-    clipped pixel the others take some of its false colour. Inside a clip nothing
-    differs to mix, while a camera's colour matrix biases every partly clipped pixel.
-    Only the partly clipped pixels' neighbours are read, in that one bracket; ``grid``
-    is ``noise_grid(codes, limit)`` when already read.
-    """
-    from hdrio.io.staging import candidate_stride, gather_pixels
-
-    count, height, width, channels = codes.shape
-    stride = candidate_stride(height, width, limit)
-    rows, cols = np.arange(0, height, stride), np.arange(0, width, stride)
-    y, x = (a.reshape(-1) for a in np.meshgrid(rows, cols, indexing="ij"))
-    limits = np.asarray(limits, dtype=np.int64)
-
-    def pattern(grid: np.ndarray) -> np.ndarray:  # (P, m, C) codes -> (P, m) bit sets
-        bits = np.zeros(grid.shape[:2], dtype=np.uint64)
-        for c in range(channels):
-            bits |= (grid[..., c] >= limits[c]).astype(np.uint64) << np.uint64(c)
-        return bits
-
-    centre = pattern(gather_pixels(codes, y * width + x) if grid is None else grid)
-    # The one pair that counts: the first bracket with a channel at its limit, if it is
-    # not the shortest and does not have every channel there (nothing left to compare).
-    first = np.argmax(centre > 0, axis=0)
-    at_first = np.take_along_axis(centre, first[None], axis=0)[0]
-    picked = (first > 0) & (at_first != (1 << channels) - 1)
-    out = np.zeros(centre.shape, dtype=bool)
-    for j in range(1, count):
-        pick = np.flatnonzero(picked & (first == j))
-        same = np.ones(pick.size, dtype=bool)
-        for dy in (-radius, 0, radius):
-            for dx in (-radius, 0, radius):
-                if pick.size and (dy or dx):
-                    index = (np.clip(y[pick] + dy, 0, height - 1) * width
-                             + np.clip(x[pick] + dx, 0, width - 1))
-                    same &= pattern(gather_pixels(codes[j:j + 1], index))[0] \
-                        == centre[j, pick]
-        out[j, pick] = same
-    return out
-
-
-def channel_mixing(grid: np.ndarray, response: CameraResponse, exposures,
-                   limits: np.ndarray, interior: np.ndarray | None = None) -> float:
-    """How far a partly clipped observation's other channels are from the next shorter
-    bracket's, in spreads of the unclipped observations of the same codes: about 0.1
-    when the camera keeps its channels apart, 2 to 80 when it mixes them after the clip.
-
-    ``grid`` ``(P, n, C)`` sampled codes, shortest first; ``interior`` ``(P, n)``
-    (:func:`clip_interior`) keeps only partly clipped observations inside a clip as
-    evidence (a lossy codec's bias at a clip's edge is not the camera's). For each pair
-    of neighbouring brackets, pixels whose shorter bracket is safe in every channel are
-    compared channel by channel (``ln`` ratio of the exposures ``f^-1(z) / t``) where the
-    longer bracket's code of that channel lies from 10 % of the range up to its limit,
-    in bins of 1/16 of the range. In each bin with 10 of each, the bin's score is the
-    distance between the medians of the partly clipped observations (another channel
-    at or above its limit in the longer bracket) and of the unclipped ones, over the
-    unclipped ones' spread (1.4826 median absolute deviation, at least 0.01). The
-    statistic is the largest, over channels, of the count-weighted mean of the bins'
-    scores; 0 when no channel has 50 partly clipped observations to compare (nothing
-    clips part-way: no evidence of mixing).
-    """
-    if grid.shape[0] < 2:
-        return 0.0
-    exposures = np.asarray(exposures, dtype=np.float64)
-    code_max = response.code_max
-    low = int(_MID[0] * code_max)
-    width = max(1, (code_max + 1) // 16)
-    g = response.log_inverse
-    channels = grid.shape[-1]
-    values: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    partly: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    codes: list[list[np.ndarray]] = [[] for _ in range(channels)]
-    for j, short, long, safe_short, clipped_long in _pairs(grid, limits):
-        ok_pixel = safe_short if interior is None else safe_short & (~clipped_long
-                                                                       | interior[j])
-        for c in range(channels):
-            ok = ok_pixel & (short[:, c] >= low) & (long[:, c] >= low) \
-                & (long[:, c] < limits[c])
-            values[c].append((g[long[ok, c], c] - np.log(exposures[j]))
-                             - (g[short[ok, c], c] - np.log(exposures[j - 1])))
-            codes[c].append(long[ok, c])
-            partly[c].append(clipped_long[ok])
-    shift = 0.0
-    for c in range(channels):
-        d, p = np.concatenate(values[c]), np.concatenate(partly[c])
-        b = np.concatenate(codes[c]) // width
-        total = weight = 0.0
-        for k in np.unique(b[p]):
-            here = b == k
-            dp, dq = d[here & p], d[here & ~p]
-            if dp.size < 10 or dq.size < 10:
-                continue
-            centre = float(np.median(dq))
-            spread = max(1.4826 * float(np.median(np.abs(dq - centre))), _SPREAD_FLOOR)
-            total += dp.size * abs(float(np.median(dp)) - centre) / spread
-            weight += dp.size
-        if weight >= _MIXING_COUNT:
-            shift = max(shift, total / weight)
-    return shift
-
-
-def policy_limits(policy: str, codes: np.ndarray, response: CameraResponse,
-                  noise: NoiseModel | None, exposures=None) -> tuple[np.ndarray, bool]:
-    """``(limits, pixel_rule)`` of ``policy`` for the kernel: the first dropped code per
-    channel, and whether a dropped channel drops the whole observation.
-
-    ``safe``: the white levels less the noise margin and the shoulders
-    (:func:`saturation_limits`), the pixel rule. ``auto``: the same where
-    :func:`channel_mixing` (inside clips, :func:`clip_interior`) exceeds 1, else the
-    white levels less the noise margin alone, per channel: with the channels kept apart
-    the shoulders' codes are worth keeping (on the truth harness's JPEG stacks they cost
-    0.06 points of median error). Without ``exposures`` (seconds) or with one bracket,
-    as ``safe`` without the shoulders.
+    ``channel``, ``pixel``: at the top code. ``safe``: the pixel rule at the white levels
+    less the noise margin (:func:`~hdrio.merge.clipping.saturation_limits`). ``auto``:
+    the clip test at those limits (:mod:`hdrio.radiometry.cliptest`: at
+    :data:`~hdrio.radiometry.cliptest.CLIP_SIGMAS` where the stack mixes its channels,
+    :data:`~hdrio.radiometry.cliptest.APART_SIGMAS` where not), the shortest bracket's
+    partly clipped observations dropped whole where
+    :func:`~hdrio.merge.clipping.channel_mixing` (inside clips,
+    :func:`~hdrio.merge.clipping.clip_interior`) exceeds 1; without ``exposures``
+    (seconds) or with one bracket, as ``safe``. ``noise`` ``None``: the codes' rounding alone.
+    ``exclude`` (``(P, H, W)`` or ``(H, W)``, ``--mask`` and ``--exclude-color``): pixels
+    of the sample where some bracket is excluded are left out of every measure
+    (:func:`~hdrio.merge.clipping.unexcluded`).
     """
     if policy not in SATURATION_POLICIES:
         raise ValueError(f"saturation policy must be one of {SATURATION_POLICIES}, "
                          f"not {policy!r}")
     channels = codes.shape[-1]
     if policy in ("channel", "pixel"):
-        return np.full(channels, response.code_max, np.int64), policy == "pixel"
+        return ClipPolicy.at_top(response.code_max, channels, policy)
     if noise is None:
         noise = NoiseModel.quantisation_only(channels)
-    grid = noise_grid(codes, MIXING_GRID_LIMIT)
-    limits = saturation_limits(codes, response, noise, grid)
-    if exposures is None or codes.shape[0] < 2:
-        return limits, True
-    if policy == "auto":
-        # The mixing test at the white levels: the shoulders would take away its evidence.
-        interior = clip_interior(codes, limits, grid=grid)
-        if channel_mixing(grid, response, exposures, limits, interior) <= _MIXING_SHIFT:
-            return limits, False
-    return shoulders(grid, response, exposures, limits), True
+    sample = _Sample(codes, exclude)
+    limits = saturation_limits(codes, response, noise, sample.grid)
+    if policy == "safe" or exposures is None or codes.shape[0] < 2:
+        return ClipPolicy(limits, rule="pixel", neutral=True)
+    grid = sample.grid
+    clipped = np.any(grid >= limits, axis=-1)
+    if not clipped.any():  # nothing clips: each channel dropped alone, nothing tested
+        return ClipPolicy(limits)
+    mixing = sample.mixing(response, exposures, limits)
+    gates = clip_gates(response, grid, limits, exposures)
+    neutral = bool(mixing > MIXING_SHIFT)
+    tables = clip_tables(response, exposures, noise,
+                         CLIP_SIGMAS if neutral else APART_SIGMAS)
+    chosen = ClipPolicy(limits, gates, "test", neutral, tables,
+                        test_spreads(grid, tables, gates), mixing)
+    partly = clipped & ~np.all(grid >= limits, axis=-1)
+    partly[0] = False
+    dropped = (dropped_observations(grid, chosen) == (1 << channels) - 1) & partly
+    share = float(dropped.sum() / partly.sum()) if partly.any() else 0.0
+    return replace(chosen, dropped=share)
+
+
+@dataclass(frozen=True)
+class SolveFilter:
+    """The observations a response solve leaves out whole where the stack mixes its
+    channels after the clip (:func:`solve_filter`): a channel at or above its limit, or
+    (after the shortest bracket) the next shorter bracket's code of some channel at or
+    above its ``reach``, which says the channel reaches its limit here.
+
+    Called with codes ``(P, n, C)``, shortest bracket first; returns ``(P, n)`` bool.
+    """
+
+    limits: np.ndarray
+    reach: np.ndarray
+    """``(P, C)``: for bracket ``j >= 1``, the least code of bracket ``j - 1`` whose
+    exposure times the exposure ratio is the limit's, ``f^-1(y) dt_j / dt_{j-1} >=
+    f^-1(limit)``; row 0 past every code."""
+
+    def __call__(self, codes: np.ndarray) -> np.ndarray:
+        out = np.any(codes >= self.limits, axis=-1)
+        out[1:] |= np.any(codes[:-1] >= self.reach[1:, None, :], axis=-1)
+        return out
+
+    def __repr__(self) -> str:
+        return f"limits {', '.join(str(int(v)) for v in self.limits)} and their reach"
+
+
+def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse, *,
+                 exclude: np.ndarray | None = None) -> SolveFilter | None:
+    """The observations the response solve leaves out (``dropped`` of
+    :func:`hdrio.response.debevec1997.response_Debevec1997`), or ``None`` to keep the
+    solve as it was.
+
+    Where the merge drops partly clipped observations whole, the solve should not fit
+    the curve to them: ``safe`` always, and ``auto`` on a stack that shows its channels
+    mixed after the clip (:func:`~hdrio.merge.clipping.channel_mixing` inside clips
+    above 1, measured with ``response``, the solve without the filter), where they are
+    biased in every channel: on camera-like brackets through the 5D Mark II's matrix the
+    green curve of a solve that kept them fell 0.2 in ``ln`` at the top codes, and the
+    hue error's p99 on clip-transition pixels tripled. A raw channel that clipped can
+    leave every output channel below its limit (a colour matrix's positive
+    off-diagonal terms), so the observations that the next shorter bracket says reach a
+    limit go too (:attr:`SolveFilter.reach`, by ``response``: the red curve was 5 % off
+    at the top codes without them). Elsewhere a partly clipped observation's unclipped
+    channels are as good as any, and the solve keeps them. ``exclude``: the solve's
+    ``(H, W)`` pixels never sampled, left out of what decides it too.
+    """
+    if policy not in ("auto", "safe") or stack.count < 2:
+        return None
+    noise = fit_noise(stack.codes, stack.exposures, response,
+                      encoding=noise_encoding(stack.files, stack.code_max), exclude=exclude)
+    sample = _Sample(stack.codes, exclude)
+    limits = saturation_limits(stack.codes, response, noise, sample.grid)
+    if policy == "auto" and not (  # clip_policy's neutral, without its test's tables
+            np.any(sample.grid >= limits)
+            and sample.mixing(response, stack.exposures, limits) > MIXING_SHIFT):
+        return None
+    X = np.exp(response.log_inverse)
+    times = np.asarray(stack.exposures, dtype=np.float64)
+    reach = np.full((stack.count, X.shape[1]), X.shape[0], dtype=np.int64)
+    for j in range(1, stack.count):
+        for c in range(X.shape[1]):
+            level = X[limits[c], c] * times[j - 1] / times[j]
+            reach[j, c] = np.searchsorted(X[:, c], level, side="left")
+    return SolveFilter(limits, reach)

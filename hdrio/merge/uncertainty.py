@@ -25,6 +25,8 @@ import numpy as np
 from numba import njit, prange
 
 from hdrio.jit import size_numba_threads
+from hdrio.merge.saturation import ClipPolicy
+from hdrio.radiometry.cliptest import dropped_channels
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, observation_variance
 from hdrio.radiometry.tables import estimate_tables
@@ -34,13 +36,17 @@ _KERNEL = dict(cache=True, nogil=True, error_model="numpy")
 
 
 @njit(parallel=True, **_KERNEL)
-def _uncertainty_kernel(codes, weights, variances, estimates, code_max, per_channel,
-                        log_domain, out):  # pragma: no cover - compiled
+def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain,
+                        out):  # pragma: no cover - compiled
     """``out[y, i]``: relative sigma of channel ``i % C`` of pixel ``i // C`` of row ``y``.
 
     ``codes`` ``(P, H, W * C)`` shortest first; ``weights``, ``variances`` and
-    ``estimates`` ``(P, C, levels)``.
+    ``estimates`` ``(P, C, levels)``; ``policy`` the merge's saturation policy
+    (:meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`).
     """
+    # Unpacked once: the tuple handed on per pixel costs an atomic reference count per
+    # array and call (hdrio.radiometry.cliptest.dropped_channels).
+    limits, gates, rule, neutral, clip_estimates, clip_variances, threshold = policy
     count = codes.shape[0]
     channels = weights.shape[1]
     height, n = out.shape
@@ -55,11 +61,10 @@ def _uncertainty_kernel(codes, weights, variances, estimates, code_max, per_chan
             while kept < count:
                 row = codes[kept, y]
                 z = row[i]
-                saturated = z == code_max
-                if not per_channel:
-                    for k in range(channels):
-                        saturated |= row[x * channels + k] == code_max
-                if saturated:
+                if z >= limits[c] or (dropped_channels(
+                        row, codes[max(kept - 1, 0), y], x * channels, kept,
+                        max(kept - 1, 0), limits, gates, rule, neutral, clip_estimates,
+                        clip_variances, threshold) >> c) & 1 == 1:
                     break
                 w = weights[kept, c, z]
                 if w > 0.0:
@@ -80,11 +85,13 @@ def _uncertainty_kernel(codes, weights, variances, estimates, code_max, per_chan
 
 def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
                          weights: np.ndarray, noise: NoiseModel, domain: str = "linear",
-                         saturation: str = "channel") -> np.ndarray:
+                         policy: ClipPolicy | None = None) -> np.ndarray:
     """``sigma_E / E`` of every pixel and channel, float32 ``(H, W, C)`` (module docstring).
 
     ``weights``: the merge's weights, ``(P, C, levels)`` or ``(1, C, levels)`` (a code
-    weighting shared by every bracket), zero at ``Z_max``.
+    weighting shared by every bracket), zero at ``Z_max``; ``policy``: the merge's
+    saturation policy (:attr:`hdrio.merge.weighted_mean.MergeStatistics.policy`; the
+    top code, channel by channel, when not given).
     """
 
     count, height, width, channels = stack.codes.shape
@@ -94,9 +101,10 @@ def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
                                                           noise))
     estimates = np.ascontiguousarray(
         estimate_tables(response, stack.channel_exposures, "linear").transpose(0, 2, 1))
+    if policy is None:
+        policy = ClipPolicy.at_top(stack.code_max, channels)
     out = np.empty((height, width * channels), dtype=np.float32)
     size_numba_threads()
     _uncertainty_kernel(stack.codes.reshape(count, height, width * channels), weights,
-                        variances, estimates, stack.code_max, saturation == "channel",
-                        domain == "log", out)
+                        variances, estimates, policy.kernel_args(), domain == "log", out)
     return out.reshape(height, width, channels)

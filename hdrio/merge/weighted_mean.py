@@ -11,27 +11,18 @@ Two domains, two saturation policies:
 
 Weights are per channel, ``w`` of that channel's own code. Saturation drops an
 observation in bracket ``j`` from ``j`` and from every longer exposure; which ones, the
-saturation policy says (:mod:`hdrio.merge.saturation`):
-
-``safe`` (the default)
-    an observation with any channel at or above its safe limit (its white level, found
-    in the data, less the noise's margin) is dropped whole, all its channels;
-``pixel`` (the tutorial's policy)
-    a pixel with any channel at ``Z_max`` is dropped whole, all its channels;
-``channel``
-    only the saturated channel is dropped. A pixel whose red clips in the longer
-    brackets keeps their green and blue, which the tutorial's policy throws away: on the
-    truth harness's StillLife stacks this takes the p99 error from 9.5 % to 2.8 % with
-    the true response (docs/accuracy.md); but a real camera mixes its channels after the
-    clip, and there it keeps biased observations (false hues at clipped edges).
+saturation policy says (:mod:`hdrio.merge.saturation`: ``auto``, the default, tests
+each partly clipped observation against the next shorter bracket; ``safe`` and the
+tutorial's ``pixel`` drop an observation whole when any channel is at its limit;
+``channel`` drops the saturated channel alone).
 
 A pixel dropped even from the shortest bracket (clipped in every bracket) takes a
 neutral lower bound: every channel the largest of that bracket's estimates over the
-pixel's channels (with ``channel``, only where every channel is clipped; a channel
-clipped alone takes that bracket's estimate). A channel with zero total weight otherwise
-(only possible with a weighting that is zero at the ends, for pixels black in every
-bracket) takes the longest usable bracket's estimate. Every output value is therefore
-finite and positive.
+pixel's channels (where the policy dropped the shortest observation whole, or every
+channel is clipped; a channel clipped alone takes that bracket's estimate). A channel
+with zero total weight otherwise (only possible with a weighting that is zero at the
+ends, for pixels black in every bracket) takes the longest usable bracket's estimate.
+Every output value is therefore finite and positive.
 
 The tutorial finds its fallback pixels as those whose sum is exactly 0; we track the
 saturation instead, which agrees except where a sum happens to cancel to 0. The work is
@@ -40,14 +31,14 @@ done by the fused kernel in ``hdrio.merge.kernel``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hdrio.io.staging import is_staged, release
 from hdrio.merge.kernel import MAX_BRACKETS, KernelTables, merge_kernel
 from hdrio.merge.row_sums import PAIR_LEVELS, pair_tables
-from hdrio.merge.saturation import SATURATION_POLICIES
+from hdrio.merge.saturation import SATURATION_POLICIES, ClipPolicy, clip_policy
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.tables import merge_tables
 from hdrio.stack import ExposureStack
@@ -71,8 +62,8 @@ class MergeStatistics:
     not counted as clipped or black (:mod:`hdrio.merge.exclusion`)."""
     limits: tuple[int, ...] = ()
     """The first code of each channel the saturation policy dropped."""
-    pixel_rule: bool = False
-    """A dropped channel dropped the whole observation."""
+    policy: ClipPolicy | None = None
+    """The saturation policy as applied (:class:`hdrio.merge.saturation.ClipPolicy`)."""
 
     @property
     def clipped_fraction(self) -> float:
@@ -88,16 +79,16 @@ released after it: 128 rows of seven 24 MP brackets hold 16 MB)."""
 def merge_brackets(stack: ExposureStack, response: CameraResponse,
                    weighting: str = "Debevec1997", domain: str = "log",
                    saturation: str = "channel", *, early_stop: bool = True,
-                   weights: np.ndarray | None = None, limits: np.ndarray | None = None,
-                   pixel_rule: bool = False) -> tuple[np.ndarray, MergeStatistics]:
+                   weights: np.ndarray | None = None, policy: ClipPolicy | None = None
+                   ) -> tuple[np.ndarray, MergeStatistics]:
     """Merge ``stack`` into relative radiance, float32 ``(H, W, C)``, finite and positive.
 
-    ``saturation`` is ``"channel"`` (a saturated channel is dropped on its own),
-    ``"pixel"`` (the tutorial: any saturated channel drops the whole pixel), ``"safe"``
-    (a channel at or above its entry of ``limits``, ``(C,)`` codes from
-    :func:`hdrio.merge.saturation.policy_limits`, drops the whole pixel; ``Z_max`` when
-    not given) or ``"auto"`` (``limits`` with the pixel rule when ``pixel_rule``, else
-    per channel).
+    ``saturation`` is a policy of :mod:`hdrio.merge.saturation`: ``"channel"`` (a
+    saturated channel is dropped on its own), ``"pixel"`` (the tutorial: any saturated
+    channel drops the whole pixel), ``"safe"`` or ``"auto"``; ``policy``, when given,
+    is that policy already decided (:func:`hdrio.merge.saturation.clip_policy`, with
+    the stack's noise model), else it is decided here with the codes' rounding for
+    noise.
     ``early_stop`` lets the kernel skip rows saturated in a shorter bracket (the same
     result to float32 rounding). ``weights``, when given, are per-bracket weights
     ``w_j(z)`` ``(P, C, code_max + 1)`` in place of ``weighting``'s ``w(z)`` (the
@@ -127,10 +118,10 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
         raise ValueError(f"the merge takes at most {MAX_BRACKETS} brackets, not {count}")
     terms, estimates = merge_tables(response, stack.channel_exposures, weighting, domain,
                                     weights)
-    if saturation in ("channel", "pixel") or limits is None:
-        limits = np.full(channels, stack.code_max)
-    limits = np.ascontiguousarray(np.clip(limits, 1, stack.code_max), dtype=np.int64)
-    pixel_rule = saturation in ("pixel", "safe") or (saturation == "auto" and pixel_rule)
+    if policy is None:
+        policy = clip_policy(saturation, stack.codes, response, None, stack.exposures)
+    policy = replace(policy, limits=np.clip(policy.limits, 1, stack.code_max))
+    limits = policy.limits
     for c, limit in enumerate(limits):  # a dropped code never counts (the kernel's resets)
         terms[:, c, limit:] = 0.0
     if channels == 3 and stack.code_max < PAIR_LEVELS:
@@ -138,7 +129,7 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     else:
         pairs = np.empty((0, channels, 1), np.complex64)  # the general path
     tables = KernelTables(terms.astype(np.complex64), estimates, pairs, stack.code_max,
-                          limits, pixel_rule, domain == "log", early_stop)
+                          policy.kernel_args(), domain == "log", early_stop)
     radiance = np.empty((height, width, channels), dtype=np.float32)
     counts = np.zeros((3, height), dtype=np.int64)  # clipped, black, skipped by the early stop
     codes = stack.codes.reshape(count, height, width * channels)  # a view (contiguous)
@@ -151,7 +142,7 @@ def merge_brackets(stack: ExposureStack, response: CameraResponse,
     statistics = MergeStatistics(
         pixels=height * width, clipped_everywhere=int(counts[0].sum()),
         black_everywhere=int(counts[1].sum()), observations_skipped=int(counts[2].sum()),
-        limits=tuple(int(v) for v in limits), pixel_rule=bool(pixel_rule),
+        limits=tuple(int(v) for v in limits), policy=policy,
     )
     return radiance, statistics
 

@@ -33,6 +33,7 @@ photographs. SIGGRAPH 97, 369-378. doi:10.1145/258734.258884
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -200,7 +201,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                          weighting: str = "Debevec1997", sampling: str = "stratified",
                          samples: int | None = None, exclude: np.ndarray | None = None,
                          seed: int = 0, levels: int | None = None, monotone: bool = True,
-                         solve_identical_once: bool = True):
+                         solve_identical_once: bool = True,
+                         dropped: Callable[[np.ndarray], np.ndarray] | None = None):
     """Recover a :class:`~hdrio.radiometry.curve.CameraResponse` from an exposure stack.
 
     Parameters
@@ -233,6 +235,14 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
+    dropped
+        Given the samples' codes ``(P, N, C)`` (bracket first), ``(P, N)`` booleans: the
+        observations (one bracket at one pixel) left out whole, all their channels taken
+        as saturated. A camera that mixes its channels after the clip biases every
+        channel of an observation a clip reached
+        (:class:`hdrio.merge.saturation.SolveFilter`). ``None``: only saturated codes
+        weigh nothing.
+
     Channels whose samples are identical (greyscale stored as RGB) are solved once
     (unless ``solve_identical_once`` is false: the same curves, solved again);
     ``parameters["channels_solved"]`` says how many solves ran.
@@ -248,6 +258,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
             "one bracket, or excluded"
         )
     Z = sample_codes(stack.codes, indices)
+    if dropped is not None:
+        Z[np.asarray(dropped(Z.transpose(1, 0, 2))).T] = code_max
     if levels != code_max + 1:
         Z = np.rint(Z.astype(np.float64) * ((levels - 1) / code_max)).astype(np.int64)
     weights = weights_table(weighting, code_max, levels)
@@ -287,7 +299,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                     "weighting": weighting,
                     "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
                     "monotone": bool(monotone), "sample_indices": indices,
-                    "channels_solved": len(solved)},
+                    "channels_solved": len(solved),
+                    **({} if dropped is None else {"dropped": repr(dropped)})},
     )
 
 

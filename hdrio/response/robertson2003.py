@@ -36,6 +36,7 @@ to dynamic range enhancement using multiple exposures. Journal of Electronic Ima
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -62,13 +63,16 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                            samples: int | None = None, exclude: np.ndarray | None = None,
                            seed: int = 0, levels: int | None = None, monotone: bool = True,
                            solve_identical_once: bool = True,
-                           iterations: int = DEFAULT_ITERATIONS) -> CameraResponse:
+                           iterations: int = DEFAULT_ITERATIONS,
+                           dropped: Callable[[np.ndarray], np.ndarray] | None = None
+                           ) -> CameraResponse:
     """Debevec's response refined by maximum likelihood (module docstring).
 
     The parameters other than ``iterations`` are
     :func:`~hdrio.response.debevec1997.response_Debevec1997`'s, for the starting solve;
     ``exclude`` (``(H, W)``, pixels never to sample) also keeps pixels out of the
-    refinement. ``parameters["iterations"]`` says how many alternations ran.
+    refinement, and ``dropped`` leaves the observations it names out of both whole.
+    ``parameters["iterations"]`` says how many alternations ran.
     """
     # Imported here: hdrio.radiometry.noise imports this package's curve module.
     from hdrio.io.staging import candidate_stride
@@ -78,8 +82,10 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     start = response_Debevec1997(stack, smoothing, weighting=weighting, sampling=sampling,
                                  samples=samples, exclude=exclude, seed=seed, levels=levels,
                                  monotone=monotone,
-                                 solve_identical_once=solve_identical_once)
+                                 solve_identical_once=solve_identical_once, dropped=dropped)
     grid = noise_grid(stack.codes)  # (P, n, C)
+    if dropped is not None:  # saturated codes are never usable
+        grid[np.asarray(dropped(grid))] = stack.code_max
     noise = fit_noise(stack.codes, stack.exposures, start, grid=grid,
                       encoding=noise_encoding(stack.files, stack.code_max))
     keep = None

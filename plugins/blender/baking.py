@@ -13,6 +13,13 @@ domain, ``g(z) - ln dt_j`` in the log domain). Whatever weights and domain the o
 name, the node follows: it computes ``sum_j w_j x_j / sum_j w_j`` (then ``exp`` in the
 log domain) with the core's saturation reset and fallback (``merge_graph.py``).
 
+The saturation policy is the core's too, as the Solve's merge decided it on the
+brackets (:class:`hdrio.merge.saturation.ClipPolicy`: each channel's limit, the clip
+test's gates, whether the shortest bracket's partly clipped observations take the
+neutral lower bound); the clip test's tables for the node's exposures come from
+:meth:`~hdrio.merge.saturation.ClipPolicy.for_brackets` (``x_j(z)`` and the standard
+deviation of each observation, :mod:`hdrio.radiometry.cliptest`).
+
 The compositor sees a bracket as code values scaled to [0, 1] (the image read as
 *Non-Color*: ``z = Z / Z_max``). A curve holds values in [0, 1], so each table is stored
 as ``(value - low) / span`` and the node maps it back with one Multiply Add.
@@ -28,6 +35,7 @@ import numpy as np
 
 from hdrio.job.options import MergeOptions
 from hdrio.job.plan import plan_merge
+from hdrio.merge.saturation import ClipPolicy
 from hdrio.radiometry.curve import CameraResponse, linear_response
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.tables import merge_tables
@@ -101,11 +109,15 @@ class BakedMerge:
         when ``log_domain``.
     log_domain
         The weighted mean is of ``ln E`` (then exponentiated), else of ``E``.
-    per_channel
-        Saturation drops a channel on its own (hdrio's ``"channel"`` policy), else the
-        whole pixel (``"pixel"``; also ``"auto"`` and ``"safe"``, which the node applies
-        at the top code: it has no stack to find white levels, shoulders or channel
-        mixing in). A pixel clipped in every bracket takes the neutral lower bound.
+    policy
+        The core's saturation policy (:class:`hdrio.merge.saturation.ClipPolicy`) with
+        its clip test's tables for these exposures: a channel at or above its limit is
+        dropped, an observation the policy drops whole every channel. A pixel dropped
+        even from the shortest bracket, whole or in every channel, takes the neutral
+        lower bound.
+    clip_estimates, clip_deviations
+        ``rule == "test"``: the test's ``x_j(z)`` (relative radiance) and the standard
+        deviation of each observation, else ``None``.
     code_max
         Saturation code of the brackets (255 or 65535).
     """
@@ -114,18 +126,21 @@ class BakedMerge:
     weights: CurveTable
     estimates: CurveTable
     log_domain: bool
-    per_channel: bool
+    policy: ClipPolicy
     code_max: int
+    clip_estimates: CurveTable | None = None
+    clip_deviations: CurveTable | None = None
 
-    @property
-    def saturation_level(self) -> float:
-        """Normalised code above which a channel counts as saturated (half a code below 1)."""
-        return (self.code_max - 0.5) / self.code_max
+    def level(self, codes: np.ndarray) -> np.ndarray:
+        """Normalised codes above which a channel is at or above ``codes`` (half a code
+        below each, as the node reads codes in [0, 1])."""
+        return (np.asarray(codes, np.float64) - 0.5) / self.code_max
 
 
 def bake_merge(response: CameraResponse, exposures: Sequence[float],
                options: MergeOptions | None = None,
-               points: int = CURVE_POINTS, noise: NoiseModel | None = None) -> BakedMerge:
+               points: int = CURVE_POINTS, noise: NoiseModel | None = None,
+               policy: ClipPolicy | None = None) -> BakedMerge:
     """hdrio's merge tables for brackets of ``exposures`` (shortest first), sampled at
     ``points`` codes for the HDR Merge node.
 
@@ -146,6 +161,10 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
         The noise model the noise-aware estimators weigh by (the one ``merge_stack``
         fitted when the node was solved); ``None``: rounding of the codes alone (an
         unsolved node, e.g. a render pass).
+    policy
+        The saturation policy the Solve's merge applied (``statistics.policy``); ``None``
+        (an unsolved node, which has no stack to find white levels in): the top code,
+        channel by channel under ``--saturation channel``, else whole observations.
     """
     if points < 2:
         raise ValueError(f"a curve needs at least 2 points, not {points}")
@@ -162,16 +181,27 @@ def bake_merge(response: CameraResponse, exposures: Sequence[float],
     code_max = int(response.code_max)
     count = min(points, code_max + 1)
     codes = np.unique(np.rint(np.linspace(0.0, code_max, count)).astype(np.int64))
-    weights = terms.imag[:, :, codes].transpose(0, 2, 1)  # (P, N, C)
-    values = estimates[:, :, codes].transpose(0, 2, 1)
-    if weights.shape[2] == 1:
-        weights, values = np.repeat(weights, 3, axis=2), np.repeat(values, 3, axis=2)
+
+    def sampled(table: np.ndarray) -> np.ndarray:  # (P, C, levels) -> (P, N, 3)
+        values = table[:, :, codes].transpose(0, 2, 1)
+        return np.repeat(values, 3, axis=2) if values.shape[2] == 1 else values
+
+    weights, values = sampled(terms.imag), sampled(estimates)
     if np.any(weights.max(axis=(0, 1)) <= 0):
         raise ValueError("the response has a channel with no supported code value")
+    if policy is None:
+        rule = "channel" if options.saturation == "channel" else "pixel"
+        policy = ClipPolicy.at_top(code_max, 3, rule)
+    policy = policy.for_brackets(response, exposures, noise)  # the test's tables
+    tables = policy.tables
     return BakedMerge(
         positions=codes / code_max, weights=CurveTable.from_values(weights),
         estimates=CurveTable.from_values(values), log_domain=domain == "log",
-        per_channel=options.saturation == "channel", code_max=code_max)
+        policy=policy, code_max=code_max,
+        clip_estimates=None if tables is None else CurveTable.from_values(
+            sampled(tables.estimates)),
+        clip_deviations=None if tables is None else CurveTable.from_values(
+            np.sqrt(sampled(tables.variances))))
 
 
 def scene_linear_response(code_max: int = 255) -> CameraResponse:
@@ -187,10 +217,23 @@ def scene_linear_response(code_max: int = 255) -> CameraResponse:
                           method="linear", parameters=dict(linear.parameters))
 
 
+@dataclass(frozen=True)
+class Solved:
+    """What the node stores of a Solve: hdrio's response, its label, the noise model and
+    the saturation policy the Solve's merge applied (its decisions; the tables are baked
+    for the node's exposures), ``None`` where a file saved before the node stored them."""
+
+    response: CameraResponse
+    label: str
+    noise: NoiseModel | None = None
+    policy: ClipPolicy | None = None
+
+
 def response_to_json(response: CameraResponse, label: str,
-                     noise: NoiseModel | None = None) -> str:
-    """What the node stores of a solved response and its noise model (its tables are
-    baked from them)."""
+                     noise: NoiseModel | None = None,
+                     policy: ClipPolicy | None = None) -> str:
+    """What the node stores of a solved response, its noise model and saturation policy
+    (its tables are baked from them)."""
     data = {
         "log_inverse": response.log_inverse.tolist(), "supported": response.supported.tolist(),
         "code_max": int(response.code_max), "method": response.method, "label": label,
@@ -202,12 +245,19 @@ def response_to_json(response: CameraResponse, label: str,
         for term in ("relative", "common"):  # the weights read ``common`` (JPEG's)
             if getattr(noise, term) is not None:
                 data["noise"][term] = np.asarray(getattr(noise, term)).tolist()
+    if policy is not None:
+        data["clip"] = {"limits": [int(v) for v in policy.limits],
+                        "gates": None if policy.gates is None
+                        else [int(v) for v in policy.gates],
+                        "rule": policy.rule, "neutral": bool(policy.neutral),
+                        "spreads": None if policy.spreads is None
+                        else np.asarray(policy.spreads).tolist()}
     return json.dumps(data)
 
 
-def response_from_json(text: str) -> tuple[CameraResponse, str, NoiseModel | None]:
-    """The response, its label and its noise model (``None`` in a file saved before the
-    node stored one) stored by :func:`response_to_json`."""
+def response_from_json(text: str) -> Solved:
+    """The response, its label, noise model and saturation policy stored by
+    :func:`response_to_json`."""
     data = json.loads(text)
     response = CameraResponse(np.asarray(data["log_inverse"], dtype=np.float64),
                               int(data["code_max"]),
@@ -221,4 +271,22 @@ def response_from_json(text: str) -> tuple[CameraResponse, str, NoiseModel | Non
                            np.asarray(noise["read"], dtype=np.float64),
                            np.asarray(noise["code"], dtype=np.float64), str(noise["source"]),
                            **extra)
-    return response, str(data["label"]), noise
+    clip = data.get("clip")
+    policy = None
+    if clip is not None:
+        policy = ClipPolicy(np.asarray(clip["limits"], np.int64),
+                            None if clip["gates"] is None else np.asarray(clip["gates"],
+                                                                         np.int64),
+                            str(clip["rule"]), bool(clip["neutral"]),
+                            spreads=None if clip.get("spreads") is None
+                            else np.asarray(clip["spreads"], np.float64))
+    return Solved(response, str(data["label"]), noise, policy)
+
+
+def highlight_gain(clip: np.ndarray, reconstructed: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` float32: hdrio's ``--highlights reconstruct`` merge over its ``clip``
+    merge of the same brackets, 1 where they agree (every pixel not clipped in every
+    bracket): what the HDR Merge node multiplies its clip merge by to reconstruct."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.asarray(reconstructed, np.float64) / np.asarray(clip, np.float64)
+    return np.where(np.isfinite(gain) & (np.asarray(clip) > 0), gain, 1.0).astype(np.float32)

@@ -7,9 +7,11 @@ nodes whenever its settings change, so it runs live on any image, render passes 
 from __future__ import annotations
 
 import bpy
-from bpy.props import FloatVectorProperty, IntProperty, StringProperty
+import numpy as np
+from bpy.props import EnumProperty, FloatVectorProperty, IntProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
+from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
 
 from .baking import BakedMerge, bake_merge, response_from_json, scene_linear_response
 from .compat import show_status
@@ -32,6 +34,11 @@ DISPLAY_VIEW = "Standard"
 """The view under which a display-linear image (the Reinhard node's output) is shown as is."""
 
 _FILLING: set[int] = set()  # nodes whose exposures the add-on is setting (not the user)
+
+# Built here, not in the annotation: Blender evaluates a property's annotation where a
+# comprehension does not see this module's names.
+HIGHLIGHT_ITEMS = [(mode, mode.capitalize(), HIGHLIGHT_HELP[mode]) for mode in HIGHLIGHT_MODES]
+RESOLVE_HIGHLIGHTS = "Highlights: Solve again to reconstruct them"
 
 
 def linked_image(socket: bpy.types.NodeSocket) -> bpy.types.Image | None:
@@ -79,6 +86,10 @@ def _exposures_changed(node: HdrioMergeNode, _context=None) -> None:
     node.rebuild()
 
 
+def _highlights_changed(node: HdrioMergeNode, _context=None) -> None:
+    node.rebuild()
+
+
 def _resize_merge(node: HdrioMergeNode, _context=None) -> None:
     node.resize_interface()
     node.rebuild()
@@ -106,6 +117,13 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     exposure_sources: StringProperty(  # type: ignore[valid-type]
         default=",".join([PLACEHOLDER] * MAX_BRACKETS), options={"HIDDEN"})
     response_json: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
+    highlights: EnumProperty(  # type: ignore[valid-type]
+        name="Highlights", default="clip", items=HIGHLIGHT_ITEMS, update=_highlights_changed,
+        description="Pixels with channels clipped in every bracket, as `hdrio merge "
+                    "--highlights`; Reconstruct is computed by the Solve")
+    # The packed image of hdrio's reconstruction over its clip merge (1 but at clipped
+    # pixels), made by the Solve when Highlights is Reconstruct.
+    highlight_image: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
     linked_files: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
     message: StringProperty(options={"HIDDEN"})  # type: ignore[valid-type]
 
@@ -122,19 +140,47 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
     def response_label(self) -> str:
         if not self.response_json:
             return UNSOLVED_LABEL
-        return response_from_json(self.response_json)[1]
+        return response_from_json(self.response_json).label
 
     def baked(self) -> BakedMerge:
         """hdrio's merge tables for this node's response and exposures (shortest first)."""
-        if self.response_json:
-            response, _, noise = response_from_json(self.response_json)
-        else:
-            response, noise = scene_linear_response(), None
-        return bake_merge(response, sorted(self.bracket_exposures()), noise=noise)
+        if not self.response_json:
+            return bake_merge(scene_linear_response(), sorted(self.bracket_exposures()))
+        solved = response_from_json(self.response_json)
+        return bake_merge(solved.response, sorted(self.bracket_exposures()),
+                          noise=solved.noise, policy=solved.policy)
 
-    def set_response(self, response_json: str) -> None:
+    def set_response(self, response_json: str, gain: np.ndarray | None = None) -> None:
+        """Store a Solve: the response and policy ``response_json``, and ``gain`` ``(H, W,
+        3)``, hdrio's ``--highlights reconstruct`` over its clip merge (``None``: none)."""
         self.response_json = response_json
+        old = bpy.data.images.get(self.highlight_image) if self.highlight_image else None
+        if old is not None:
+            bpy.data.images.remove(old)
+        self.highlight_image = ""
+        if gain is not None:
+            height, width = gain.shape[:2]
+            image = bpy.data.images.new(f".hdrio highlights {self.name}", width, height,
+                                        alpha=True, float_buffer=True)
+            image.colorspace_settings.name = "Non-Color"
+            rgba = np.concatenate([gain, np.ones_like(gain[..., :1])], axis=-1)
+            image.pixels.foreach_set(rgba[::-1].astype(np.float32).reshape(-1))  # bottom-up
+            image.file_format = "OPEN_EXR"
+            image.pack()
+            self.highlight_image = image.name
         self.rebuild()
+
+    def free(self) -> None:
+        image = bpy.data.images.get(self.highlight_image) if self.highlight_image else None
+        if image is not None:
+            bpy.data.images.remove(image)
+        super().free()
+
+    def highlight_gain(self) -> bpy.types.Image | None:
+        """The Solve's reconstruction image, when Highlights is Reconstruct."""
+        if self.highlights != "reconstruct" or not self.highlight_image:
+            return None
+        return bpy.data.images.get(self.highlight_image)
 
     def bracket_exposures(self) -> list[float]:
         return [float(v) for v in self.exposures[: self.bracket_count]]
@@ -166,7 +212,8 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
                                  socket_type="NodeSocketColor")
 
     def rebuild(self) -> None:
-        build_merge_graph(self.node_tree, self.baked(), self.bracket_exposures())
+        build_merge_graph(self.node_tree, self.baked(), self.bracket_exposures(),
+                          self.highlight_gain())
 
     def bracket_images(self) -> list[bpy.types.Image | None]:
         return [linked_image(socket) for socket in self.inputs[: self.bracket_count]]
@@ -216,6 +263,9 @@ class HdrioMergeNode(PrivateGroupMixin, bpy.types.CompositorNodeCustomGroup):
         state = exposure_state(self.sources()[: self.bracket_count])
         layout.label(text=state, icon="ERROR" if missing else "CHECKMARK")
         layout.label(text=f"Response: {self.response_label()}")
+        layout.prop(self, "highlights")
+        if self.highlights == "reconstruct" and self.highlight_gain() is None:
+            layout.label(text=RESOLVE_HIGHLIGHTS, icon="ERROR")
         if self.message:
             layout.label(text=self.message, icon="ERROR")
         layout.context_pointer_set("node", self)

@@ -8,6 +8,7 @@ line naming the file and the problem, and the operator is cancelled: no tracebac
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import bpy
@@ -18,17 +19,12 @@ from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_files, merge_stack
-from hdrio.merge.highlights import HIGHLIGHT_HELP, HIGHLIGHT_MODES
 from hdrio.tonemap import TONEMAP_METHODS
 
-from .baking import response_to_json
+from .baking import highlight_gain, response_to_json
 from .compat import active_compositor_tree, compositor_tree, find_node_tree
-from .nodes import DISPLAY_VIEW, HdrioMergeNode, image_path, merge_node_name
+from .nodes import DISPLAY_VIEW, HIGHLIGHT_ITEMS, HdrioMergeNode, image_path, merge_node_name
 from .warmup import WARMUP
-
-# Built here, not in the annotation: Blender evaluates a property's annotation where a
-# comprehension does not see this module's names.
-HIGHLIGHT_ITEMS = [(mode, mode.capitalize(), HIGHLIGHT_HELP[mode]) for mode in HIGHLIGHT_MODES]
 
 
 def kernels_ready(operator: bpy.types.Operator) -> bool:
@@ -90,12 +86,17 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
         try:
             stack = read_brackets(paths, exposures=node.bracket_exposures())
             result = merge_stack(stack, options)
+            gain = None
+            if node.highlights == "reconstruct":  # hdrio's own, as `--highlights reconstruct`
+                rebuilt = merge_stack(stack, replace(options, highlights="reconstruct"),
+                                      response=result.response)
+                gain = highlight_gain(result.radiance, rebuilt.radiance)
         except HdrioError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         node.set_response(response_to_json(
             result.response, f"{result.response.method} from {len(paths)} brackets",
-            result.noise))
+            result.noise, result.statistics.policy), gain)
         self.report({"INFO"}, f"response solved from {len(paths)} brackets")
         return {"FINISHED"}
 

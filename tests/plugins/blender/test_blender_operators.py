@@ -62,37 +62,71 @@ def test_solve_operator_bakes_hdrio_response(write_brackets, tmp_path):
     assert node.response_json != before
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "solved.exr", size)
 
-    # The node applies hdrio's default saturation policy as the pixel rule at the top code.
-    reference = merge_stack(read_brackets(paths), MergeOptions(saturation="pixel")).radiance
+    # The node applies the saturation policy the Solve's merge decided (hdrio's default).
+    reference = merge_stack(read_brackets(paths), MergeOptions()).radiance
     assert_matches_merge("solved", merged, reference)
+
+
+def assert_matches_command(label: str, merged: np.ndarray, paths, tmp_path,
+                           *options: str) -> None:
+    """The node's render against the EXR ``hdrio merge`` writes with its defaults (and
+    ``options``): half floats, and a power-of-two scale if its range needs one, so
+    after one global scale. The issue's bound: p99 1e-3 (half's 11-bit mantissa is
+    4.9e-4)."""
+    command = tmp_path / f"{label}.exr"
+    assert hdrio_main(["merge", *map(str, paths), "-o", str(command), "-q", *options]) == 0
+    written, _ = read_exr(command)
+    written = written[..., :3].astype(np.float64)
+    scale = np.median(written / merged)
+    difference = relative_difference(merged * scale, written)
+    print(f"{label} against hdrio merge {' '.join(options)}: scale {scale:.6g}, "
+          f"p99 {np.percentile(difference, 99):.1e}, max {difference.max():.1e}")
+    assert np.percentile(difference, 99) <= 1e-3
 
 
 def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tmp_path):
     # Real JPEGs: the solved response has codes no sample fell on (red code 83 here),
     # which hdrio's merge gives no weight; the node must reproduce these one-code notches.
+    # A 5D Mark II mixes its channels after the clip: the Solve's merge tests partly
+    # clipped observations and gives the window (clipped in every bracket) the neutral
+    # lower bound, which the node must apply as hdrio merge does.
     paths = sorted(shared_data("frobisher_001").glob("*.jpg"))
     scene = bpy.context.scene
     node = solved_merge_node(clean_compositor(scene), paths)
     assert node.bracket_exposures() == pytest.approx([1 / 8, 1.0, 8.0])  # from EXIF
-    # The node applies hdrio's default saturation policy as the pixel rule at the top code.
-    result = merge_stack(read_brackets(paths), MergeOptions(saturation="pixel"))
+    result = merge_stack(read_brackets(paths), MergeOptions())
     assert not np.all(result.response.supported[1:-1])  # the case this test is about
+    policy = result.statistics.policy
+    assert policy.rule == "test" and policy.neutral
     merged = render_to_exr(scene, node.outputs[0], tmp_path / "frobisher.exr",
                            result.radiance.shape[:2])
     assert_matches_merge("frobisher", merged, result.radiance)
+    window = result.statistics.clipped_everywhere / result.statistics.pixels
+    assert window > 0.04  # the window (4.6 %): neutral in the node as in the command
+    assert_matches_command("frobisher", merged, paths, tmp_path)
 
-    # The acceptance: against the EXR `hdrio merge` writes with its defaults (half
-    # floats, and a power-of-two scale if its range needs one), after one global scale.
-    command = tmp_path / "cli.exr"
-    assert hdrio_main(["merge", *map(str, paths), "-o", str(command), "-q",
-                       "--saturation", "pixel"]) == 0
-    written, _ = read_exr(command)
-    written = written[..., :3].astype(np.float64)
-    scale = np.median(written / merged)
-    difference = relative_difference(merged * scale, written)
-    print(f"frobisher against hdrio merge: scale {scale:.6g}, "
-          f"p99 {np.percentile(difference, 99):.1e}, max {difference.max():.1e}")
-    assert np.percentile(difference, 99) <= 1e-3  # half's 11-bit mantissa is 4.9e-4
+
+def test_merge_node_reconstructs_highlights_as_hdrio_merge(shared_data, tmp_path):
+    # Highlights: Reconstruct is `hdrio merge --highlights reconstruct`, hdrio's own
+    # (baked by the Solve), multiplied into the node's merge.
+    paths = sorted(shared_data("frobisher_001").glob("*.jpg"))
+    scene = bpy.context.scene
+    tree = clean_compositor(scene)
+    node = merge_node_with(tree, paths)
+    node.highlights = "reconstruct"
+    assert node.highlight_gain() is None  # nothing until solved
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+    assert node.highlight_gain() is not None
+    result = merge_stack(read_brackets(paths), MergeOptions(highlights="reconstruct"))
+    merged = render_to_exr(scene, node.outputs[0], tmp_path / "rebuilt.exr",
+                           result.radiance.shape[:2])
+    assert_matches_command("reconstruct", merged, paths, tmp_path,
+                           "--highlights", "reconstruct")
+    node.highlights = "clip"  # back to the lower bound, without a new Solve
+    clipped = render_to_exr(scene, node.outputs[0], tmp_path / "clip.exr",
+                            result.radiance.shape[:2])
+    assert_matches_command("clip", clipped, paths, tmp_path)
 
 
 def test_solve_refuses_placeholder_exposures_in_one_line(write_brackets):
