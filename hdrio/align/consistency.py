@@ -30,7 +30,7 @@ from hdrio.align.comparametric import bounds, comparametric_correction
 from hdrio.io.staging import is_staged, release
 from hdrio.jit import INNER
 from hdrio.parallel import on_threads
-from hdrio.radiometry.cliptest import dropped_channels
+from hdrio.radiometry.cliptest import dropped_channels_call
 from hdrio.skips import well_exposed_codes
 
 CAP = 100.0
@@ -223,6 +223,7 @@ def _consistency(start, stop, codes, tables, clip, rules, todo,
     start_bounded = np.empty(channels, np.bool_)
     bounded = np.empty(channels, np.bool_)  # the chain's value is a bound
     known = np.empty(count, np.int8)
+    by_clip = np.empty(count, np.bool_)  # dropped whole by the clip policy
     gathered = np.empty((cols * (cell // stride + 1), count, channels), codes.dtype)
     for cy in range(start, stop):
         for y in range(cy * cell + stride // 2, min(height, (cy + 1) * cell), stride):
@@ -242,10 +243,12 @@ def _consistency(start, stop, codes, tables, clip, rules, todo,
                 for x in range(cx * cell + stride // 2, min(width, (cx + 1) * cell), stride):
                     sample = gathered[i]
                     i += 1
-                    if rule != 0 and dropped_channels(
-                            sample[reference], sample[max(reference - 1, 0)], 0, reference,
-                            max(reference - 1, 0), limits, gates, rule, neutral,
-                            clip_estimates, clip_variances, threshold) == whole:
+                    for k in range(count):  # one call site: less to compile
+                        by_clip[k] = rule != 0 and dropped_channels_call(
+                            sample[k], sample[max(k - 1, 0)], 0, k, max(k - 1, 0), limits,
+                            gates, rule, neutral, clip_estimates, clip_variances,
+                            threshold) == whole
+                    if by_clip[reference]:
                         continue  # the reference's observation is bent by a clip
                     for k in range(count):  # not known[:] = -1: less to compile
                         known[k] = -1
@@ -279,10 +282,7 @@ def _consistency(start, stop, codes, tables, clip, rules, todo,
                             bounded[c] = start_bounded[c]
                         j = reference + direction
                         while 0 <= j < count:
-                            if rule != 0 and dropped_channels(
-                                    sample[j], sample[max(j - 1, 0)], 0, j, max(j - 1, 0),
-                                    limits, gates, rule, neutral, clip_estimates,
-                                    clip_variances, threshold) == whole:
+                            if by_clip[j]:
                                 j += direction  # bent by a clip: the merge drops it
                                 continue
                             total = 0.0

@@ -162,6 +162,19 @@ def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, 
     return 0
 
 
+@njit(**INNER)
+def dropped_channels_call(longer, shorter, base, j, k, limits, gates, rule, neutral,
+                          estimates, variances, threshold):  # pragma: no cover - compiled
+    """:func:`dropped_channels` as a function of its own, compiled once and called, not
+    inlined, by the kernels that ask once per sample (deghosting's test,
+    :func:`dropped_observations`): inlined into deghosting's test it cost a first run 4 s
+    of compiling. (The merge's kernels, which ask per pixel on every thread, inline
+    :func:`dropped_channels`: a call passes its arrays with a reference count each, which
+    the threads contend for.)"""
+    return dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral,
+                            estimates, variances, threshold)
+
+
 def untested(code_max: int, channels: int) -> tuple:
     """The policy's parts (:func:`dropped_channels`) of one that drops nothing whole: each
     channel alone at the top code, no test."""
@@ -177,9 +190,9 @@ def _flag_grid(codes, policy, out):  # pragma: no cover - compiled
     for j in range(count):
         previous = max(j - 1, 0)
         for i in range(n):
-            out[j, i] = dropped_channels(codes[j, i], codes[previous, i], 0, j, previous,
-                                         limits, gates, rule, neutral, estimates,
-                                         variances, threshold)
+            out[j, i] = dropped_channels_call(codes[j, i], codes[previous, i], 0, j,
+                                              previous, limits, gates, rule, neutral,
+                                              estimates, variances, threshold)
 
 
 def dropped_observations(codes: np.ndarray, policy) -> np.ndarray:
