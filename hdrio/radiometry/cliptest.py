@@ -22,8 +22,9 @@ observations show about them (:func:`hdrio.merge.clipping.test_spreads`: a noise
 that leaves noise out, a response that is a few percent off, must not make every
 partly clipped observation look corrupted). Where a channel disagrees by more than
 :data:`CLIP_SIGMAS` such standard deviations, or is at its limit in the shorter bracket
-and not in this one (a clip only grows with exposure: a JPEG's ringing, or a
-misregistered edge, put a clipped channel's code below its limit), the whole
+and not in this one, or the shorter bracket's estimate is above :data:`REACH` times
+the radiance at which this one clips (a clip only grows with exposure: a JPEG's
+ringing, or a misregistered edge, put a clipped channel's code below its limit), the whole
 observation is dropped (from its bracket and, as every dropped code, from every longer
 one): a clip reached the pixel. An observation with no channel near its clip is never
 tested (a stack where nothing clips is merged as before); one with every channel at its
@@ -81,6 +82,16 @@ standard deviations dropped 11-30 % of the partly clipped JPEG observations and 
 to 0.08 points of median error (GoldenGate 2.160 % to 2.237 %), 6 cost 0.001; on the
 hand-held canal JPEGs (no mixing shown) 6 leaves 12 of 3186 sky-edge pixels more than
 10 degrees off the best bracket's hue, 4 leaves 9 (335 before the test)."""
+
+REACH = 1.25
+"""A channel below its limit in bracket ``j`` where the shorter bracket's estimate is
+above this factor times the radiance at which ``j`` clips (``x_j(limit)``) fails the
+test whatever the variances say: the longer exposure must have clipped there, so its
+code was bent (a clip's edge, JPEG's ringing, a misregistered edge). Near the top codes
+a response's slope makes the variances too wide to tell: on the hand-held canal stack
+a sky pixel read (200, 225, 247) in the 1/4 s frame and (254, 255, 249) in the 1 s one,
+whose blue, kept, put a yellow speck on the sky's edge. The margin covers a response a
+few percent off at its top."""
 
 RULES = {"channel": 0, "pixel": 1, "test": 2}
 """How a partly clipped observation is dropped: its clipped channels alone (``channel``),
@@ -155,9 +166,10 @@ def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, 
         y = shorter[base + c]
         if z >= limits[c]:
             continue
-        d = estimates[j, c, z] - estimates[k, c, y]
-        if y >= limits[c] or d * d > threshold[j, c] * (
-                variances[j, c, z] + variances[k, c, y]):
+        shorter_x = estimates[k, c, y]
+        d = estimates[j, c, z] - shorter_x
+        if (y >= limits[c] or shorter_x > REACH * estimates[j, c, limits[c]]
+                or d * d > threshold[j, c] * (variances[j, c, z] + variances[k, c, y])):
             return whole
     return 0
 

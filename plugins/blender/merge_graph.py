@@ -23,6 +23,8 @@ from collections.abc import Sequence
 
 import bpy
 
+from hdrio.radiometry.cliptest import REACH
+
 from .baking import BakedMerge, CurveTable
 from .exposures import sorted_order
 from .graph import GraphBuilder
@@ -89,9 +91,13 @@ class _ClipTest:
             allowed = build.math("MULTIPLY", build.math("ADD", v[c], shorter_v[c]),
                                  float(thresholds[c]))
             fails = build.math("GREATER_THAN", build.math("MULTIPLY", d, d), allowed)
-            # Below its limit here, and disagreeing or at its limit in the shorter one.
-            flags.append(build.math("MULTIPLY", below,
-                                    build.math("MAXIMUM", shorter_clipped[c], fails)))
+            # Where this bracket must have clipped (the core's REACH).
+            clips_here = float(REACH * policy.tables.estimates[rank, c, int(policy.limits[c])])
+            beyond = build.math("GREATER_THAN", shorter_x[c], clips_here)
+            # Below its limit here, and disagreeing, beyond its reach or at its limit in
+            # the shorter one.
+            flags.append(build.math("MULTIPLY", below, build.math(
+                "MAXIMUM", build.math("MAXIMUM", shorter_clipped[c], fails), beyond)))
         whole = build.math("MULTIPLY", _any(build, near), _any(build, flags))
         return [build.math("MAXIMUM", clipped[c], whole) for c in range(3)]
 
