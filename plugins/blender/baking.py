@@ -36,6 +36,7 @@ import numpy as np
 from hdrio.job.options import MergeOptions
 from hdrio.job.plan import plan_merge
 from hdrio.merge.saturation import ClipPolicy
+from hdrio.radiometry.cliptest import REACH
 from hdrio.radiometry.curve import CameraResponse, linear_response
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.tables import merge_tables
@@ -135,6 +136,21 @@ class BakedMerge:
         """Normalised codes above which a channel is at or above ``codes`` (half a code
         below each, as the node reads codes in [0, 1])."""
         return (np.asarray(codes, np.float64) - 0.5) / self.code_max
+
+    def reach(self, rank: int) -> np.ndarray:
+        """``(3,)``: per channel, the least code of bracket ``rank - 1`` whose estimate is
+        above :data:`hdrio.radiometry.cliptest.REACH` times the radiance at which bracket
+        ``rank`` clips (past the top code where none is), the clip test's reach
+        (:func:`hdrio.radiometry.cliptest.dropped_channels`) as a code: the node compares
+        codes exactly, where its curves' sampled estimates are not."""
+        x = self.policy.tables.estimates
+        out = np.full(3, self.code_max + 1, np.int64)
+        for c in range(3):
+            limit = int(self.policy.limits[c])
+            above = np.nonzero(x[rank - 1, c] > REACH * x[rank, c, limit])[0]
+            if above.size:
+                out[c] = above[0]
+        return out
 
 
 def bake_merge(response: CameraResponse, exposures: Sequence[float],

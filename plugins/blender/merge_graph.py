@@ -23,8 +23,6 @@ from collections.abc import Sequence
 
 import bpy
 
-from hdrio.radiometry.cliptest import REACH
-
 from .baking import BakedMerge, CurveTable
 from .exposures import sorted_order
 from .graph import GraphBuilder
@@ -64,7 +62,7 @@ class _ClipTest:
         policy = baked.policy
         self.limits = baked.level(policy.limits)
         self.gates = baked.level(policy.limits if policy.gates is None else policy.gates)
-        self.previous = None  # the last bracket's (clipped, estimates, variances)
+        self.previous = None  # the last bracket's (clipped, estimates, variances, codes)
 
     def dropped(self, image, codes, rank: int, estimates, label: str) -> list:
         """1 where channel ``c`` of bracket ``rank`` is dropped (0 or 1 per channel): at or
@@ -74,16 +72,17 @@ class _ClipTest:
         if policy.rule == "channel":
             return clipped
         if policy.rule == "pixel" or rank == 0:  # nothing shorter to test against
-            remembered = self._remember(image, clipped, rank, estimates, label)
+            remembered = self._remember(image, codes, clipped, rank, estimates, label)
             if policy.rule == "pixel" or policy.neutral:
                 return [_any(build, clipped)] * 3
             return remembered
         near = [build.math("GREATER_THAN", codes[c], self.gates[c]) for c in range(3)]
-        shorter_clipped, shorter_x, shorter_v = self.previous
-        clipped = self._remember(image, clipped, rank, estimates, label)
+        shorter_clipped, shorter_x, shorter_v, shorter_codes = self.previous
+        clipped = self._remember(image, codes, clipped, rank, estimates, label)
 
         x, v = self.previous[1], self.previous[2]
         thresholds = policy.kernel_args()[-1][rank]  # the core's, per channel
+        reach = self.baked.reach(rank)
         flags = []
         for c in range(3):
             below = build.math("SUBTRACT", 1.0, clipped[c])
@@ -91,9 +90,10 @@ class _ClipTest:
             allowed = build.math("MULTIPLY", build.math("ADD", v[c], shorter_v[c]),
                                  float(thresholds[c]))
             fails = build.math("GREATER_THAN", build.math("MULTIPLY", d, d), allowed)
-            # Where this bracket must have clipped (the core's REACH).
-            clips_here = float(REACH * policy.tables.estimates[rank, c, int(policy.limits[c])])
-            beyond = build.math("GREATER_THAN", shorter_x[c], clips_here)
+            # Where this bracket must have clipped (the core's REACH), as a code of the
+            # shorter one: exact, where the curves' sampled estimates are not.
+            beyond = build.math("GREATER_THAN", shorter_codes[c],
+                                float(self.baked.level(reach[c])))
             # Below its limit here, and disagreeing, beyond its reach or at its limit in
             # the shorter one.
             flags.append(build.math("MULTIPLY", below, build.math(
@@ -101,7 +101,7 @@ class _ClipTest:
         whole = build.math("MULTIPLY", _any(build, near), _any(build, flags))
         return [build.math("MAXIMUM", clipped[c], whole) for c in range(3)]
 
-    def _remember(self, image, clipped, rank, estimates, label):
+    def _remember(self, image, codes, clipped, rank, estimates, label):
         """Keep bracket ``rank``'s clip flags, linear estimates and variances for the
         next bracket's test (the test's own tables in the log domain)."""
         if self.baked.policy.rule == "test":
@@ -110,7 +110,7 @@ class _ClipTest:
                 build, image, baked, baked.clip_estimates, rank, f"clip test x ({label})")
             sd = _table_values(build, image, baked, baked.clip_deviations, rank,
                                f"clip test sd ({label})")
-            self.previous = (clipped, x, [build.math("MULTIPLY", s, s) for s in sd])
+            self.previous = (clipped, x, [build.math("MULTIPLY", s, s) for s in sd], codes)
         return clipped
 
 

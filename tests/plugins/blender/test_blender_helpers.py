@@ -82,7 +82,8 @@ def node_merge(codes: np.ndarray, baked) -> np.ndarray:
             v = table(baked.clip_deviations, j) ** 2 + table(baked.clip_deviations, j - 1) ** 2
             spread = np.ones(3) if policy.spreads is None else policy.spreads[j]
             fails = d * d > v * ((policy.tables.sigmas * spread) ** 2).astype(np.float32)
-            flags = ~clipped[j] & (clipped[j - 1] | fails)
+            beyond = z[j - 1] > baked.level(baked.reach(j)).astype(np.float32)
+            flags = ~clipped[j] & (clipped[j - 1] | fails | beyond)
             whole = near[j].any(axis=-1, keepdims=True) & flags.any(axis=-1, keepdims=True)
             saturated[j] |= whole
     dropped = np.maximum.accumulate(saturated, axis=0)
