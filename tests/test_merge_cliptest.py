@@ -154,6 +154,34 @@ def test_masked_remerge_applies_the_clip_test_as_the_kernel():
     assert whole[1:].any()  # the test dropped some observations whole here
 
 
+
+def test_resampling_factors_do_not_turn_the_clip_test_off():
+    # Alignment's resampling factors (hdrio.align.resampling) lower a warped bracket's
+    # weight where its resampling error outweighs its noise; the bracket still saw the
+    # scene, so the clip test still reads it. The same factor on every bracket scales
+    # every sum alike and must leave the merge as it is: the test once read the factored
+    # weight, and a factor under 0.5 on the shorter bracket switched it off there,
+    # keeping partly clipped observations channel by channel at a warped stack's edges.
+    from hdrio.merge.masked import remerge_masked
+    from hdrio.radiometry.tables import merge_tables
+    from tests.test_merge_kernel import _policy as kernel_policy
+    from tests.test_merge_kernel import _response, _stack
+
+    stack, response = _stack(255), _response(255)
+    policy = kernel_policy(stack, response, "test neutral")
+    merged, _ = merge_brackets(stack, response, domain="linear", policy=policy)
+    terms, estimates = merge_tables(response, stack.exposures, "Debevec1997", "linear")
+    whole = dropped_observations(stack.codes.reshape(stack.count, -1, 3), policy) == 0b111
+    assert whole[1:].any()  # the test drops some observations whole here
+    height, width = stack.codes.shape[1:3]
+    keep = np.ones((stack.count, height, width))
+    again = merged.copy()
+    factors = np.full((stack.count, height, width), 0.3, np.float32)
+    remerge_masked(stack.codes, keep, 1, terms, estimates, policy, False, again,
+                   factors=factors)
+    # The re-merge sums in float64, the kernel in float32: 1e-5 relative.
+    np.testing.assert_allclose(again, merged, rtol=1e-5)
+
 def _canal(shared_data):
     folder = shared_data("hdrtoolbox_stacks")
     return sorted((folder / "alignment").glob("*.jpg")), folder / "exposures.csv"

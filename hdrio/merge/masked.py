@@ -82,9 +82,9 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
                         # The clip test reads the next shorter bracket kept here: one
                         # masked out or moving says nothing of the pixel.
                         k = max(j - 1, 0)
-                        while k > 0 and m[k] < 0.5:
+                        while k > 0 and held[k] < 0.5:
                             k -= 1
-                        if j > 0 and m[k] < 0.5 and rule == 2:
+                        if j > 0 and held[k] < 0.5 and rule == 2:
                             dropped[j] = 0  # no shorter bracket kept: nothing to test
                         else:
                             dropped[j] = dropped_channels(
