@@ -155,13 +155,18 @@ def test_masked_remerge_applies_the_clip_test_as_the_kernel():
 
 
 
-def test_resampling_factors_do_not_turn_the_clip_test_off():
+def test_resampling_factors_widen_the_clip_test_and_never_turn_it_off():
     # Alignment's resampling factors (hdrio.align.resampling) lower a warped bracket's
-    # weight where its resampling error outweighs its noise; the bracket still saw the
-    # scene, so the clip test still reads it. The same factor on every bracket scales
-    # every sum alike and must leave the merge as it is: the test once read the factored
-    # weight, and a factor under 0.5 on the shorter bracket switched it off there,
-    # keeping partly clipped observations channel by channel at a warped stack's edges.
+    # weight where its resampling error outweighs its noise: f = noise / (noise +
+    # resampling error). The bracket still saw the scene, so the clip test still reads
+    # it, allowing a disagreement 1 / f times the variance more. The same factor on every
+    # bracket scales every sum alike, so the re-merge is the kernel's merge under the
+    # test at K / sqrt(f). The test once read the factored weight, and a factor under 0.5
+    # on the shorter bracket switched it off there: the hand-held canal stack kept a
+    # middle bracket's partly clipped red channel by channel along a boat's edge, a row
+    # of cyan specks (red 55 beside green 1462).
+    from dataclasses import replace
+
     from hdrio.merge.masked import remerge_masked
     from hdrio.radiometry.tables import merge_tables
     from tests.test_merge_kernel import _policy as kernel_policy
@@ -169,14 +174,17 @@ def test_resampling_factors_do_not_turn_the_clip_test_off():
 
     stack, response = _stack(255), _response(255)
     policy = kernel_policy(stack, response, "test neutral")
-    merged, _ = merge_brackets(stack, response, domain="linear", policy=policy)
+    factor = 0.3
+    wider = replace(policy, tables=replace(policy.tables,
+                                           sigmas=policy.tables.sigmas / np.sqrt(factor)))
+    merged, _ = merge_brackets(stack, response, domain="linear", policy=wider)
     terms, estimates = merge_tables(response, stack.exposures, "Debevec1997", "linear")
-    whole = dropped_observations(stack.codes.reshape(stack.count, -1, 3), policy) == 0b111
-    assert whole[1:].any()  # the test drops some observations whole here
+    whole = dropped_observations(stack.codes.reshape(stack.count, -1, 3), wider) == 0b111
+    assert whole[1:].any()  # the wider test still drops some observations whole here
     height, width = stack.codes.shape[1:3]
     keep = np.ones((stack.count, height, width))
-    again = merged.copy()
-    factors = np.full((stack.count, height, width), 0.3, np.float32)
+    again = merged.copy()  # a channel saturated in every bracket keeps the kernel's bound
+    factors = np.full((stack.count, height, width), factor, np.float32)
     remerge_masked(stack.codes, keep, 1, terms, estimates, policy, False, again,
                    factors=factors)
     # The re-merge sums in float64, the kernel in float32: 1e-5 relative.
