@@ -230,3 +230,42 @@ def test_clip_interior_is_false_within_the_radius_of_a_clip_edge():
     # columns 20-23 (within 4 px of it) are not interior.
     assert not columns[:24].any() and columns[24:].all()
     assert not inside[0].any()  # only the bracket where the pixel first clips counts
+
+
+@pytest.mark.parametrize("mix", [True, False])
+def test_the_deghost_policy_read_from_the_solve_filters_survey_is_the_one_measured_anew(mix):
+    # The response solve's filter measures a noise model, the limits and the mixing; the
+    # deghost stage's policy reads them again (Surveys) instead of measuring them a
+    # second time. Where the survey holds (the same codes, exposures, response and
+    # encoding) it must give exactly the policy and noise measured anew; where anything
+    # differs, it must not be found.
+    from dataclasses import replace
+
+    from benchmarks.truth.stacks import exposure_ladder
+    from hdrio.merge.saturation import Surveys, clip_policy, solve_filter
+    from hdrio.radiometry.noise import noise_encoding
+    from hdrio.radiometry.noise_fit import fit_noise
+
+    scene = _scene("Desk")
+    times = exposure_ladder(scene, 5, 2.0)
+    response, _ = gamma_inverse_response()
+    codes, _ = render_camera_brackets(scene.radiance, times, seed=2, mixing=mix)
+    stack = ExposureStack.from_arrays(codes, times, files=[f"b{j}.png" for j in range(5)])
+    surveys = Surveys()
+    solve_filter("auto", stack, response, surveys=surveys)
+    encoding = noise_encoding(stack.files, stack.code_max)
+    survey = surveys.find(stack.codes, stack.exposures, response, encoding)
+    assert survey is not None
+    noise = fit_noise(stack.codes, stack.exposures, response, encoding=encoding)
+    for term in ("shot", "read", "code", "relative", "common"):
+        assert np.array_equal(getattr(survey.noise, term), getattr(noise, term)), term
+    fresh = clip_policy("auto", stack.codes, response, noise, stack.exposures)
+    assert fresh.rule == "test" and fresh.tables is not None  # the test's tables built
+    assert clip_policy("auto", stack.codes, response, survey.noise, stack.exposures,
+                       survey=survey) == fresh
+    # Another response, other exposures, a copy of the codes: not this survey's.
+    other = replace(response, log_inverse=response.log_inverse + 0.0)
+    assert surveys.find(stack.codes, stack.exposures, other, encoding) is None
+    assert surveys.find(stack.codes, [2 * t for t in times], response, encoding) is None
+    assert surveys.find(stack.codes.copy(), stack.exposures, response, encoding) is None
+    assert surveys.find(stack.codes, stack.exposures, response, "16-bit") is None

@@ -39,6 +39,7 @@ from hdrio.job.output import (
 )
 from hdrio.job.plan import MergePlan, plan_merge
 from hdrio.job.result import MergeResult, PhaseClock, Progress
+from hdrio.merge.saturation import Surveys
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.saved_response import read_response
 from hdrio.skips import SkipReport
@@ -58,7 +59,9 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     say, clock, options = progress or _quiet, PhaseClock(), plan.options
     skipped = SkipReport(dropped=list(stack.dropped))
     prepared = stages.prepare(stack, plan)
-    solve = None if response is not None else stages.response_solver(prepared, plan, say)
+    surveys = Surveys()  # what the solve's clip filter measured, for deghosting's policy
+    solve = None if response is not None else stages.response_solver(prepared, plan, say,
+                                                                      surveys)
     prepared, response, exposure_check = stages.response_stage(prepared, plan, response,
                                                                solve, say)
     if solve is not None:
@@ -72,7 +75,7 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     clock.lap("align")
     solved = response
     response, tested, clip = stages.deghost_stage(stack, response, motion, plan, resolve,
-                                                  prepared.excluded, say)
+                                                  prepared.excluded, say, surveys)
     clock.lap("deghost")
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
     noise = stages.noise_stage(stack, response, plan, tested if response is solved else None,

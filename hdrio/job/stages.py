@@ -33,7 +33,7 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
-from hdrio.merge.saturation import ClipPolicy, SolveFilter, clip_policy, solve_filter
+from hdrio.merge.saturation import ClipPolicy, SolveFilter, Surveys, clip_policy, solve_filter
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise
@@ -114,13 +114,15 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
     return Prepared(stack, filtered, inferring, masks, exclusions(stack, plan, masks))
 
 
-def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve:
+def response_solver(prepared: Prepared, plan: MergePlan, say: Progress,
+                    surveys: Surveys | None = None) -> Solve:
     """The solve ``--response`` names (the linear response for camera RAW), as
     ``solve(stack, exclude)``: alignment and deghosting re-solve with it.
 
     Where the stack mixes its channels after the clip, the solve is run again without
     the observations at or reaching the clip (:func:`hdrio.merge.saturation.solve_filter`:
-    they are biased in every channel, and would bend the curve)."""
+    they are biased in every channel, and would bend the curve); what that measures is
+    kept in ``surveys``, for the deghost stage's policy."""
     options, filtered = plan.options, prepared.filtered
     method = "linear" if is_raw_stack(prepared.stack) else options.response
     say(f"camera response: {method}" + ("" if method == "linear"
@@ -140,7 +142,8 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress) -> Solve
         response = solved_with()
         if method == "linear":
             return response
-        dropped = solve_filter(options.saturation, stack, response, exclude=exclude)
+        dropped = solve_filter(options.saturation, stack, response, exclude=exclude,
+                               surveys=surveys)
         return response if dropped is None else solved_with(dropped)
 
     return solve
@@ -232,8 +235,8 @@ def stack_noise(stack: ExposureStack, response: CameraResponse,
 
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
-                  say: Progress) -> tuple[CameraResponse, NoiseModel | None,
-                                          ClipPolicy | None]:
+                  say: Progress, surveys: Surveys | None = None
+                  ) -> tuple[CameraResponse, NoiseModel | None, ClipPolicy | None]:
     """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved
     without them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``,
     ``noise`` the model the consistency test read and ``clip`` the saturation policy it
@@ -241,14 +244,21 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
     in a stack that mixes its channels after the clip, the observations it drops whole
     say nothing of motion), both ``None`` without deghosting. ``excluded``: the
     observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
-    noise fit and the test too."""
+    noise fit and the test too. ``surveys``: the response solve's measures
+    (:class:`hdrio.merge.saturation.Surveys`), read again where they hold: the same
+    codes (not warped), exposures and response, nothing excluded."""
     if plan.deghosts:
         say("deghosting")
     noise = clip = None
     if plan.deghosts and stack.count > 1:
-        noise = stack_noise(stack, response, excluded)
+        survey = None
+        if surveys is not None and excluded is None and not motion.warped:
+            survey = surveys.find(stack.codes, stack.exposures, response, noise_encoding(
+                stack.files, stack.code_max, is_raw_stack(stack)))
+        noise = survey.noise if survey is not None else stack_noise(stack, response,
+                                                                     excluded)
         clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
-                           stack.exposures, exclude=excluded)
+                           stack.exposures, exclude=excluded, survey=survey)
     mixed = clip.kernel_args() if clip is not None and clip.neutral else None
     return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
                         excluded, mixed), noise, clip
