@@ -127,6 +127,31 @@ def test_a_white_level_is_reported_only_where_the_codes_pile_up(peak, white):
         <= max(0.03 * longest.shape[0], 0.5 * np.count_nonzero(near))
 
 
+
+def test_a_longer_observation_below_a_shorter_clip_is_dropped_whole_far_from_any_gate():
+    # The shorter bracket clips red; the longer one (4x the exposure) reads every channel
+    # far below its gates: it must have clipped, so it saw something else (a mover, a
+    # misregistered edge). The kernel's resets drop its red alone; kept, its green and
+    # blue stood beside the shorter brackets' red, a speck of no scene's colour (the
+    # hand-held canal stack's laundry edge: (30, 28) from the longest frame, 442 in blue
+    # from the shortest). The test drops it whole; the same codes with the shorter
+    # bracket unclipped stay untested.
+    short = np.array([[255, 80, 60], [200, 80, 60]])
+    long = np.array([[90, 70, 50], [90, 70, 50]])
+    codes = np.stack([short, long]).astype(np.uint8)
+    dropped = dropped_observations(codes, _policy())
+    assert list(dropped[1]) == [0b111, 0]
+    assert not dropped_observations(codes, replace(_policy(), rule="channel")).any()
+    # The kernel drops it as the test does: the pixel is the shorter bracket's alone.
+    response, _ = gamma_inverse_response()
+    stack = ExposureStack.from_arrays(codes[:, None], TIMES)
+    merged, _ = merge_brackets(stack, response, domain="linear", policy=_policy())
+    X = np.exp(response.log_inverse)
+    for c in (1, 2):
+        np.testing.assert_allclose(merged[0, 0, c], X[short[0, c], c] / TIMES[0], rtol=1e-5)
+    # (Red: clipped in the shorter bracket, dropped from the longer: the lower bound.)
+    assert merged[0, 0, 0] >= 0.99 * X[254, 0] / TIMES[0]
+
 def test_masked_remerge_applies_the_clip_test_as_the_kernel():
     # Keep weights of (nearly) 1 give the kernel's merge: the re-merge drops the same
     # observations whole (deghosting, alignment's resampling and --mask re-merge through

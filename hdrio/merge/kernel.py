@@ -194,7 +194,8 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
     observation dropped whole) set to ``Z_max``, so that the per-channel resets apply
     the policy (a channel at or above its limit they drop themselves). The pixel rule
     in one pass written so that it vectorises; the clip test copies the row and tests
-    only the observations with a channel at or above its gate."""
+    only the observations with a channel at or above its gate, or below its limit where
+    the shorter bracket is at it."""
     limits, gates, rule, neutral, estimates, variances, threshold = policy
     channels = limits.size
     row = codes[j, y]
@@ -217,7 +218,8 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
         base = x * channels
         near = False
         for k in range(channels):
-            near |= row[base + k] >= gates[k]
+            near |= (row[base + k] >= gates[k]) | (
+                (row[base + k] < limits[k]) & (shorter[base + k] >= limits[k]))
         if not near:
             continue
         dropped = dropped_channels(row, shorter, base, j, max(j - 1, 0), limits, gates,

@@ -84,8 +84,10 @@ class _ClipTest:
         thresholds = policy.kernel_args()[-1][rank]  # the core's, per channel
         reach = self.baked.reach(rank)
         flags = []
+        under = []  # below its limit where the shorter bracket is at it
         for c in range(3):
             below = build.math("SUBTRACT", 1.0, clipped[c])
+            under.append(build.math("MULTIPLY", below, shorter_clipped[c]))
             d = build.math("SUBTRACT", x[c], shorter_x[c])
             allowed = build.math("MULTIPLY", build.math("ADD", v[c], shorter_v[c]),
                                  float(thresholds[c]))
@@ -98,7 +100,11 @@ class _ClipTest:
             # the shorter one.
             flags.append(build.math("MULTIPLY", below, build.math(
                 "MAXIMUM", build.math("MAXIMUM", shorter_clipped[c], fails), beyond)))
-        whole = build.math("MULTIPLY", _any(build, near), _any(build, flags))
+        # Tested near a gate; and, wherever it is, an observation below its limit where
+        # the shorter bracket is at it (this one must have clipped: a mover, or a
+        # misregistered edge).
+        whole = build.math("MAXIMUM", build.math(
+            "MULTIPLY", _any(build, near), _any(build, flags)), _any(build, under))
         return [build.math("MAXIMUM", clipped[c], whole) for c in range(3)]
 
     def _remember(self, image, codes, clipped, rank, estimates, label):

@@ -85,6 +85,8 @@ def node_merge(codes: np.ndarray, baked) -> np.ndarray:
             beyond = z[j - 1] > baked.level(baked.reach(j)).astype(np.float32)
             flags = ~clipped[j] & (clipped[j - 1] | fails | beyond)
             whole = near[j].any(axis=-1, keepdims=True) & flags.any(axis=-1, keepdims=True)
+            # Below its limit where the shorter bracket is at it: dropped wherever it is.
+            whole |= (~clipped[j] & clipped[j - 1]).any(axis=-1, keepdims=True)
             saturated[j] |= whole
     dropped = np.maximum.accumulate(saturated, axis=0)
     numerator = np.zeros(codes.shape[1:], np.float32)
