@@ -205,7 +205,7 @@ class _Sample:
         return channel_mixing(self.grid, response, exposures, limits, interior)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # found by identity (Survey.holds_for), never compared
 class Survey:
     """What deciding a policy measures on one stack through one response, no pixel
     excluded: the noise model, the sample, the limits and (where something clips) the
