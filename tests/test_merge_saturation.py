@@ -269,3 +269,24 @@ def test_the_deghost_policy_read_from_the_solve_filters_survey_is_the_one_measur
     assert surveys.find(stack.codes, [2 * t for t in times], response, encoding) is None
     assert surveys.find(stack.codes.copy(), stack.exposures, response, encoding) is None
     assert surveys.find(stack.codes, stack.exposures, response, "16-bit") is None
+
+
+@pytest.mark.parametrize("deghost", ["auto", "off"])
+def test_a_merge_fits_the_noise_once_where_the_solve_filter_measured_it(deghost, monkeypatch):
+    # The response solve's clip filter fits the noise model and measures the limits and
+    # the mixing; the deghost stage (or, with --deghost off, the merge stage) reads them
+    # again instead of fitting a second time, and the result is the same.
+    from hdrio.job import stages
+    from hdrio.job.options import MergeOptions
+    from hdrio.job.run import merge_stack
+    from tests.test_merge_kernel import _stack
+
+    options = MergeOptions(deghost=deghost, align="off")
+    first = merge_stack(_stack(255), options)
+
+    def refit(*args, **kwargs):
+        raise AssertionError("the noise model was fitted a second time")
+
+    monkeypatch.setattr(stages, "stack_noise", refit)
+    again = merge_stack(_stack(255), options)
+    np.testing.assert_array_equal(again.radiance, first.radiance)

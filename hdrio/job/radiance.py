@@ -24,7 +24,7 @@ from hdrio.job.result import Progress
 from hdrio.merge.exclusion import masked_statistics, remerge_excluded
 from hdrio.merge.highlights import HighlightReport, reconstruct_highlights
 from hdrio.merge.masked import remerge_masked
-from hdrio.merge.saturation import ClipPolicy, clip_policy
+from hdrio.merge.saturation import ClipPolicy, Survey, clip_policy
 from hdrio.merge.uncertainty import relative_uncertainty
 from hdrio.merge.weighted_mean import MergeStatistics, merge_brackets
 from hdrio.radiometry.curve import CameraResponse
@@ -64,11 +64,12 @@ class Merged:
 def merge_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
                 noise: NoiseModel | None, say: Progress, *,
                 excluded: np.ndarray | None = None,
-                policy: ClipPolicy | None = None) -> Merged:
+                policy: ClipPolicy | None = None, survey: Survey | None = None) -> Merged:
     """The weighted mean of ``stack``'s brackets with the plan's estimator, under the
     saturation policy decided on the observations not ``excluded`` (``(P, H, W)``:
-    ``--mask``, ``--exclude-color``; :func:`hdrio.merge.saturation.clip_policy`), or
-    ``policy`` where deghosting already decided it on the same stack, response and
+    ``--mask``, ``--exclude-color``; :func:`hdrio.merge.saturation.clip_policy`, reading
+    ``survey``, the response solve's measures of this stack with ``noise``, where given),
+    or ``policy`` where deghosting already decided it on the same stack, response and
     noise."""
     options, estimator = plan.options, plan.estimator
     jit.announce(say, "merge")
@@ -76,7 +77,7 @@ def merge_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
     weights = plan.weight_tables(response, stack.channel_exposures, noise)
     if policy is None:
         policy = clip_policy(options.saturation, stack.codes, response, noise,
-                             stack.exposures, exclude=excluded)
+                             stack.exposures, exclude=excluded, survey=survey)
     radiance, statistics = merge_brackets(
         stack, response, options.weighting, estimator.domain, options.saturation,
         early_stop="early-stop" in plan.skips, weights=weights, policy=policy)

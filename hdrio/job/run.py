@@ -78,13 +78,17 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
                                                   prepared.excluded, say, surveys)
     clock.lap("deghost")
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
-    noise = stages.noise_stage(stack, response, plan, tested if response is solved else None,
-                               prepared.excluded)
+    fitted, survey = tested if response is solved else None, None
+    if fitted is None and clip is None and plan.fits_noise:  # no deghosting: the solve's
+        survey = stages.held_survey(stack, response, motion, prepared.excluded, surveys)
+        fitted = None if survey is None else survey.noise
+    noise = stages.noise_stage(stack, response, plan, fitted, prepared.excluded)
     excluded = prepared.excluded if merged_stack is stack else None
     # Deghosting's policy holds where the merge sees its stack, response and noise.
     same = response is solved and merged_stack is stack and noise is tested
     merged = merging.merge_stage(merged_stack, response, plan, noise, say, excluded=excluded,
-                                 policy=clip if same else None)
+                                 policy=clip if same else None,
+                                 survey=survey if merged_stack is stack else None)
     skipped.early_stop_fraction = merged.early_stop_fraction
     clock.lap("merge")
     unseen, resampled = merging.remerge_stage(stack, merged_stack, response, merged, plan,

@@ -33,7 +33,14 @@ from hdrio.merge.ladder import (
     starting_response,
 )
 from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
-from hdrio.merge.saturation import ClipPolicy, SolveFilter, Surveys, clip_policy, solve_filter
+from hdrio.merge.saturation import (
+    ClipPolicy,
+    SolveFilter,
+    Survey,
+    Surveys,
+    clip_policy,
+    solve_filter,
+)
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise
@@ -233,6 +240,17 @@ def stack_noise(stack: ExposureStack, response: CameraResponse,
         stack.files, stack.code_max, is_raw_stack(stack)), exclude=excluded)
 
 
+def held_survey(stack: ExposureStack, response: CameraResponse, motion: Motion,
+                excluded: np.ndarray | None, surveys: Surveys | None) -> Survey | None:
+    """What the response solve's clip filter measured (``surveys``), where it holds for
+    ``stack`` and ``response``: the same codes (not warped since), exposures, response
+    and encoding, nothing excluded; else ``None``."""
+    if surveys is None or excluded is not None or motion.warped:
+        return None
+    return surveys.find(stack.codes, stack.exposures, response, noise_encoding(
+        stack.files, stack.code_max, is_raw_stack(stack)))
+
+
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
                   say: Progress, surveys: Surveys | None = None
@@ -251,10 +269,7 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
         say("deghosting")
     noise = clip = None
     if plan.deghosts and stack.count > 1:
-        survey = None
-        if surveys is not None and excluded is None and not motion.warped:
-            survey = surveys.find(stack.codes, stack.exposures, response, noise_encoding(
-                stack.files, stack.code_max, is_raw_stack(stack)))
+        survey = held_survey(stack, response, motion, excluded, surveys)
         noise = survey.noise if survey is not None else stack_noise(stack, response,
                                                                      excluded)
         clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
