@@ -5,13 +5,16 @@ links to one rendered ladder, named by the file-name convention), merged to half
 the ``hdrio`` command as a user runs it, one fresh process per row:
 
 * ``--threads 1``: one worker, the sets one after another in the process (the baseline);
-* the same pinned to one core (``taskset -c 0``): one farm slot, the unit a farm
-  manager hands out; a worker's merge is itself multi-threaded, so one unpinned worker
-  already keeps most of two cores busy and a second worker can add only what it leaves
-  idle, while workers of one core each show how the engine scales with workers;
+* the same pinned to one core (its affinity set as ``taskset -c 0`` sets it): one farm
+  slot, the unit a farm manager hands out; a worker's merge is itself multi-threaded, so
+  one unpinned worker already keeps most of two cores busy and a second worker can add
+  only what it leaves idle, while workers of one core each show how the engine scales
+  with workers (``--no-pinned`` leaves it out);
 * ``--threads N``: a local pool of N worker processes, for each N of ``--workers``
-  (default ``1,2``; the 16-core device's run is ``--sets 48 --workers 1,4,16``);
-* ``--dask local:N``: a Dask ``LocalCluster`` of as many;
+  (default ``1,2``; the 16-core device's run, :mod:`benchmarks.cores`: ``--sets 48
+  --workers 1,4,16 --dask 16``);
+* ``--dask local:N``: a Dask ``LocalCluster`` of as many (each N of ``--dask``; by
+  default every N of ``--workers``);
 * ``hdrio merge`` of one set: the single-run memory budget.
 
 Throughput is sets per minute of the whole command (start-up included), with the CPU
@@ -30,7 +33,6 @@ import argparse
 import json
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -38,20 +40,11 @@ from fractions import Fraction
 from pathlib import Path
 
 from benchmarks.speed.endtoend import write_jpegs
+from benchmarks.speed.process import timed
 from benchmarks.speed.scene import bracket_stack
 
 DEFAULT_OUT = Path(__file__).parent / "results"
 _PEAK = re.compile(r"worker peak (\d+) MB")
-_MEASURE = """
-import resource, subprocess, sys, time
-start = time.perf_counter()
-code = subprocess.run(sys.argv[1:], capture_output=True, text=True)
-seconds = time.perf_counter() - start
-print(code.stdout + code.stderr)
-usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-print("EXIT", code.returncode, "SECONDS", seconds, "PEAK_KB", usage.ru_maxrss,
-      "CPU_S", usage.ru_utime + usage.ru_stime)
-"""
 
 
 def make_shoot(folder: Path, sets: int, frames: int, height: int, width: int) -> Path:
@@ -71,41 +64,40 @@ def make_shoot(folder: Path, sets: int, frames: int, height: int, width: int) ->
     return shoot
 
 
-def measure(command: list[str]) -> dict:
-    """Run ``command`` in a fresh process; wall seconds, exit code, largest process's
-    peak (MB), per-set worker peaks, the load average before and after."""
+def measure(command: list[str], cores: int = 0) -> dict:
+    """Run ``command`` in a fresh process (on the first ``cores`` CPUs when given); wall
+    seconds, CPU seconds, the largest process's peak (MB), per-set worker peaks, the load
+    average before and after."""
     load_before = os.getloadavg()[0]
-    completed = subprocess.run([sys.executable, "-c", _MEASURE, *command],
-                               capture_output=True, text=True, check=True)
-    last = completed.stdout.strip().splitlines()[-1].split()
-    output = completed.stdout
-    if last[1] != "0":
-        raise RuntimeError(f"{' '.join(command)} failed:\n{output}")
-    peaks = [int(p) for p in _PEAK.findall(output)]
-    return {"seconds": float(last[3]), "process_peak_mb": int(last[5]) / 1024,
-            "cpu_seconds": float(last[7]),
+    result = timed(command, cores=cores)
+    peaks = [int(p) for p in _PEAK.findall(result["output"])]
+    return {"seconds": result["seconds"], "process_peak_mb": result["peak_mb"],
+            "cpu_seconds": result["cpu_seconds"],
             "worker_peak_mb": max(peaks) if peaks else None,
             "load_before": load_before, "load_after": os.getloadavg()[0]}
 
 
-def runs(hdrio: list[str], folder: Path, shoot: Path, sets: int, workers: list[int]
-         ) -> list[tuple[str, int, list[str]]]:
-    """The rows: one set alone, one worker pinned to one core, then for each count of
-    ``workers`` the local pool (``--threads N``) and a Dask ``LocalCluster``
-    (``--dask local:N``)."""
+def runs(hdrio: list[str], folder: Path, shoot: Path, sets: int, workers: list[int],
+         dask: list[int], pinned: bool = True) -> list[tuple[str, int, int, list[str]]]:
+    """The rows, each ``(name, sets, cores, command)`` (``cores`` 0: every CPU): one set
+    alone, one worker pinned to one core (when ``pinned``), then for each count of
+    ``workers`` the local pool (``--threads N``) and, for the counts also in ``dask``, a
+    Dask ``LocalCluster`` (``--dask local:N``)."""
     one_set = sorted(shoot.glob("pos_a_*.jpg"))
-    rows = [("hdrio merge, one set (single-run budget)", 1,
-             [*hdrio, "merge", *map(str, one_set), "-o", str(folder / "one.exr")]),
-            ("--group, 1 worker pinned to one core (taskset -c 0)", sets,
-             ["taskset", "-c", "0", *hdrio, "--threads", "1", str(shoot), "--group",
-              "--merge", "-o", f"{folder}/pinned/{{first_stem}}.exr"])]
+    rows = [("hdrio merge, one set (single-run budget)", 1, 0,
+             [*hdrio, "merge", *map(str, one_set), "-o", str(folder / "one.exr")])]
+    if pinned:
+        rows.append(("--group, 1 worker pinned to one core (affinity, as taskset -c 0)",
+                     sets, 1, [*hdrio, "--threads", "1", str(shoot), "--group", "--merge",
+                               "-o", f"{folder}/pinned/{{first_stem}}.exr"]))
     for count in workers:
-        rows.append((f"--group, local pool of {count} (--threads {count})", sets,
+        rows.append((f"--group, local pool of {count} (--threads {count})", sets, 0,
                      [*hdrio, "--threads", str(count), str(shoot), "--group", "--merge",
                       "-o", f"{folder}/pool{count}/{{first_stem}}.exr"]))
-        rows.append((f"--group --dask local:{count}", sets,
-                     [*hdrio, str(shoot), "--dask", f"local:{count}", "--group", "--merge",
-                      "-o", f"{folder}/dask{count}/{{first_stem}}.exr"]))
+        if count in dask:
+            rows.append((f"--group --dask local:{count}", sets, 0,
+                         [*hdrio, str(shoot), "--dask", f"local:{count}", "--group",
+                          "--merge", "-o", f"{folder}/dask{count}/{{first_stem}}.exr"]))
     return rows
 
 
@@ -119,9 +111,10 @@ def ratios(by_name: dict[str, dict], workers: list[int]) -> dict[str, float]:
     result = {}
     for count in workers[1:]:
         pool = rate(f"--group, local pool of {count} (--threads {count})")
-        dask = rate(f"--group --dask local:{count}")
         result[f"pool {count} / {workers[0]} workers"] = pool / one
-        result[f"dask local:{count} / pool {count}"] = dask / pool
+        if f"--group --dask local:{count}" in by_name:
+            dask = rate(f"--group --dask local:{count}")
+            result[f"dask local:{count} / pool {count}"] = dask / pool
     return result
 
 
@@ -134,17 +127,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", default="1,2",
                         help="worker counts, the first the baseline (the device's 16-core "
                              "run: 1,4,16)")
+    parser.add_argument("--dask", default=None,
+                        help="worker counts also run on a Dask LocalCluster (default: every "
+                             "count of --workers; 'none' for none)")
+    parser.add_argument("--no-pinned", dest="pinned", action="store_false",
+                        help="leave out the row of one worker pinned to one core")
     parser.add_argument("--json", type=Path, default=DEFAULT_OUT / "farm.json")
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.size.split("x"))
     workers = [int(v) for v in args.workers.split(",")]
+    dask = (workers if args.dask is None else
+            [] if args.dask == "none" else [int(v) for v in args.dask.split(",")])
     hdrio = [sys.executable, "-m", "hdrio"]
     rows = []
     with tempfile.TemporaryDirectory(prefix="hdrio-farm-") as folder:
         folder = Path(folder)
         shoot = make_shoot(folder, args.sets, args.frames, height, width)
-        for name, sets, command in runs(hdrio, folder, shoot, args.sets, workers):
-            row = {"run": name, "sets": sets, **measure(command)}
+        for name, sets, cores, command in runs(hdrio, folder, shoot, args.sets, workers,
+                                               dask, args.pinned):
+            row = {"run": name, "sets": sets, **measure(command, cores)}
             row["sets_per_minute"] = 60 * sets / row["seconds"]
             row["cpu_seconds_per_set"] = row["cpu_seconds"] / sets
             rows.append(row)

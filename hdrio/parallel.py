@@ -9,11 +9,12 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
 T = TypeVar("T")
+R = TypeVar("R")
 _DONE = object()  # read_ahead's end marker
 _PR_SET_PDEATHSIG = 1
 _PARENT_POLL_S = 0.5
@@ -60,6 +61,17 @@ def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
                    for start, stop in zip(bounds[:-1], bounds[1:])]
         for future in futures:
             future.result()
+
+
+def map_on_threads(function: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    """``[function(item) for item in items]``, the items spread over the threads (each
+    one task; for a few independent pieces of NumPy or LAPACK work, which release the
+    GIL), in the items' order. One thread: a plain loop."""
+    workers = max(1, min(threads(), len(items)))
+    if workers == 1:
+        return [function(item) for item in items]
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio") as pool:
+        return list(pool.map(function, items))
 
 
 def read_ahead(items: Iterator[T]) -> Iterator[T]:

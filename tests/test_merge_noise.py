@@ -92,6 +92,26 @@ def test_fit_recovers_the_renderers_noise(demo):
     assert np.all((ratios >= BOUNDS[0]) & (ratios <= BOUNDS[1])), ratios
 
 
+def test_the_fit_and_the_exposure_check_do_not_depend_on_the_threads(demo, monkeypatch):
+    # The channels are fitted, and the exposure check's bracket pairs measured, on
+    # threads: each piece is the same arithmetic whatever thread runs it, so the results
+    # are identical (not merely close) on one thread and on four.
+    from hdrio.merge.exposure_check import fit_log_exposures
+
+    _, stack, _ = demo
+    response, _ = gamma_truth()
+    found = {}
+    for budget in ("1", "4"):
+        monkeypatch.setenv("HDRIO_THREADS", budget)
+        fitted = fit_noise(stack.codes, stack.exposures, response)
+        log_t, unlinked = fit_log_exposures(stack.codes, response,
+                                            prior=np.log(stack.exposures))
+        found[budget] = (fitted.shot, fitted.read, fitted.code, fitted.relative,
+                         fitted.pairs, log_t, unlinked)
+    for one, four in zip(found["1"], found["4"]):
+        assert np.array_equal(one, four)
+
+
 def test_fit_falls_back_to_the_encodings_floors_on_a_flat_scene():
     # Nothing to measure: every term at its floor, none zero (a zero read noise handed
     # near-black codes of short brackets the weight on real night stacks: issue 28).

@@ -56,3 +56,36 @@ def test_process_section_times_the_commands_users_type(tmp_path):
     # Peak memory from the OS for each process: a real Python process holds > 10 MB.
     assert all(row["process_peak_mb"] > 10 for row in rows)
     assert results["ratios"]["process: hdrio merge 7 JPEGs / I/O floor process"] > 0
+
+
+def test_a_merges_log_is_split_into_its_stages():
+    from benchmarks.cores import stages
+
+    log = ("[  0.00 s] reading 7 brackets\n[  0.34 s] camera response: Debevec1997\n"
+           "[  0.91 s] aligning 7 brackets (auto)\n[  1.01 s] deghosting\n"
+           "[  1.32 s] merging 7 brackets\n[  1.80 s] writing out.exr\n"
+           "wrote:     out.exr (half, zip) in 0.60 s\n")
+    found = stages(log, 3.0)
+    assert found["reading"] == pytest.approx(0.34)
+    assert found["camera"] == pytest.approx(0.57)
+    assert found["writing"] == pytest.approx(0.60)
+    assert found["start-up and exit"] == pytest.approx(3.0 - 2.40)
+
+
+def test_the_many_core_run_measures_the_merge_its_floor_and_a_shoot(tmp_path):
+    # What docs/speed.md's "Many cores" table comes from, on a tiny ladder: every row a
+    # process with its CPU seconds and peak from the OS, the ratios from rows of one run.
+    from benchmarks.cores import main as cores
+
+    assert cores(["--size", "64x96", "--cores", "1,all", "--scaling", "1", "--repeats", "1",
+                  "--sets", "2", "--shoot-size", "48x64", "--workers", "1,2", "--dask", "",
+                  "--out", str(tmp_path)]) == 0
+    results = json.loads((tmp_path / "cores.json").read_text())
+    sections = {row["section"] for row in results["rows"]}
+    assert sections == {"merge 7 x 24 MP", "peak", "scaling", "first run"}
+    assert all(row["peak_mb"] > 10 and row["cpu_seconds"] > 0 for row in results["rows"])
+    assert results["ratios"]["1 cores: merge / floor (wall)"] > 0
+    assert "merging" in next(row for row in results["rows"]
+                             if row["section"] == "scaling")["stages"]
+    shoot = json.loads((tmp_path / "farm.json").read_text())
+    assert "pool 2 / 1 workers" in shoot["throughput_ratios"]

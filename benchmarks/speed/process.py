@@ -1,7 +1,7 @@
 """The commands a user types, timed as processes: wall time and peak RSS from the OS.
 
-Each row runs one command in a fresh process under ``/usr/bin/time -f '%e %M'`` (wall
-seconds, peak resident KB of that process, as the kernel counts it), so start-up,
+Each row runs one command in a fresh process (:func:`timed`: wall seconds, CPU seconds
+and the peak resident memory of that process, as the kernel counts them), so start-up,
 imports, the kernel cache load and everything the command does around its core are in.
 The I/O floor is a process too: a plain OpenImageIO script that decodes the same JPEGs
 and writes one half ZIP EXR, timed in the same run. It writes the very pixels hdrio wrote
@@ -14,6 +14,7 @@ wall time.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import statistics
@@ -28,7 +29,20 @@ from benchmarks.speed.endtoend import write_jpegs
 from benchmarks.speed.scene import bracket_stack
 from hdrio.io.images import read_image
 
-_TIME = "/usr/bin/time"
+_MEASURE = """
+import json, os, resource, subprocess, sys, time
+cores = int(sys.argv[1])
+if cores:
+    os.sched_setaffinity(0, range(cores))
+start = time.perf_counter()
+completed = subprocess.run(sys.argv[2:], capture_output=True, text=True)
+seconds = time.perf_counter() - start
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"returncode": completed.returncode, "seconds": seconds,
+                  "peak_mb": usage.ru_maxrss / 1024,
+                  "cpu_seconds": usage.ru_utime + usage.ru_stime,
+                  "output": completed.stdout + completed.stderr}))
+"""
 _FLOOR = """
 import sys
 import numpy as np
@@ -57,21 +71,24 @@ def hdrio_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "hdrio"]
 
 
-def timed(argv: list[str], env: dict[str, str] | None = None) -> dict:
-    """Run ``argv`` once; ``{"seconds", "peak_mb"}`` from ``/usr/bin/time``.
+def timed(argv: list[str], env: dict[str, str] | None = None, cores: int = 0) -> dict:
+    """Run ``argv`` once, on the first ``cores`` CPUs when given (affinity set before
+    the command starts, so hdrio sizes its threads to it as under ``taskset``):
+    ``{"seconds", "peak_mb", "cpu_seconds", "output"}``.
 
-    ``/usr/bin/time`` is a small process, so the peak is the command's own (a child of
-    this big Python would inherit its high-water mark through fork and exec).
+    A small Python process starts the command and reads its resources from the OS
+    (``getrusage`` of its children: peak resident memory, user + system CPU of every
+    thread); it is started from this big one by ``posix_spawn``/``vfork``, so the peak is
+    the command's own, not a high-water mark inherited through ``fork``. Raises when the
+    command fails, with the end of its output.
     """
-    if not Path(_TIME).exists():
-        raise RuntimeError(f"{_TIME} not found (apt-get install time)")
-    completed = subprocess.run([_TIME, "-f", "%e %M %U %S", *argv], capture_output=True,
-                               text=True, env={**os.environ, **(env or {})})
-    if completed.returncode != 0:
-        raise RuntimeError(f"{' '.join(argv[:3])}... failed: {completed.stderr[-500:]}")
-    seconds, peak_kb, user, system = completed.stderr.strip().splitlines()[-1].split()
-    return {"seconds": float(seconds), "peak_mb": int(peak_kb) / 1024,
-            "cpu_seconds": float(user) + float(system)}
+    completed = subprocess.run([sys.executable, "-c", _MEASURE, str(cores), *argv],
+                               capture_output=True, text=True, check=True,
+                               env={**os.environ, **(env or {})})
+    result = json.loads(completed.stdout.strip().splitlines()[-1])
+    if result["returncode"] != 0:
+        raise RuntimeError(f"{' '.join(argv[:3])}... failed:\n{result['output'][-1500:]}")
+    return result
 
 
 def _median(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> dict:

@@ -262,18 +262,24 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         layer = layer if layer.ndim == 3 else layer[..., None]
         planes.append(layer)
         names += [f"{name}.{c}" for c in ("RGB" if layer.shape[-1] == 3 else "Y")]
+    # As half: the image's own channels scaled and kept positive (colour at least half's
+    # smallest subnormal, so no pixel becomes 0; alpha 0 stays 0, e.g. pixels masked
+    # everywhere: hdrio.merge.exclusion), the layers unscaled and kept finite.
+    count = len(names)
+    scales = [float(factor)] * own + [1.0] * (count - own)
+    lows = [HALF_MIN_POSITIVE] * min(own, 3) + [0.0] * (own - min(own, 3)) + [
+        -HALF_MAX] * (count - own)
+    highs = [HALF_MAX] * count
+
+    from hdrio.io.half import to_half  # numba: not for the commands that write no EXR
 
     def band(rows: np.ndarray) -> np.ndarray:
+        if pixel_type == "half":  # on every core, each piece observed where it is made
+            return to_half(rows, scales, lows, highs, observe and (lambda done: observe(
+                done[..., :own])))
         rows = np.array(rows, dtype=np.float32)
-        colour = rows[..., :own]
         if factor != 1:
-            colour *= factor
-        if pixel_type == "half":  # the image's own channels stay positive; layers keep 0
-            # Alpha 0 stays 0 (e.g. pixels masked everywhere: hdrio.merge.exclusion).
-            np.clip(colour[..., :3], HALF_MIN_POSITIVE, HALF_MAX, out=colour[..., :3])
-            np.clip(colour[..., 3:], 0.0, HALF_MAX, out=colour[..., 3:])
-            np.clip(rows[..., own:], -HALF_MAX, HALF_MAX, out=rows[..., own:])
-            rows = rows.astype(np.float16)
+            rows[..., :own] *= factor
         if observe is not None:
             observe(rows[..., :own])
         return rows

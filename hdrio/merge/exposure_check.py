@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.io.staging import strided_copy
+from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -82,21 +83,28 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
     columns = np.arange(channels)
     log_e = response.log_inverse[sample, columns]
     good = (sample > low) & (sample < high) & response.supported[sample, columns]
+    pairs = [(j, k) for j in range(count) for k in range(j + 1, min(count, j + 3))]
+
+    def measured(pair: tuple[int, int]) -> tuple[int, float]:
+        """The pair's overlap, and the median log ratio over it (NaN when too small)."""
+        j, k = pair
+        both = good[j] & good[k]
+        overlap = int(np.count_nonzero(both))
+        return overlap, (float(np.median(log_e[k][both] - log_e[j][both]))
+                         if overlap >= MIN_OVERLAP else math.nan)
+
     rows, targets, weights = [], [], []
     linked = np.zeros(max(count - 1, 0), bool)
-    for j in range(count):
-        for k in range(j + 1, min(count, j + 3)):
-            both = good[j] & good[k]
-            overlap = int(np.count_nonzero(both))
-            if overlap >= MIN_OVERLAP:
-                rows.append((j, k))
-                targets.append(float(np.median(log_e[k][both] - log_e[j][both])))
-                weights.append(math.sqrt(overlap))
-                linked[j:k] = True
-            if k == j + 1 and prior is not None:  # the weak tie to the metadata
-                rows.append((j, k))
-                targets.append(prior[k] - prior[j])
-                weights.append(PRIOR_WEIGHT)
+    for (j, k), (overlap, ratio) in zip(pairs, map_on_threads(measured, pairs)):
+        if overlap >= MIN_OVERLAP:
+            rows.append((j, k))
+            targets.append(ratio)
+            weights.append(math.sqrt(overlap))
+            linked[j:k] = True
+        if k == j + 1 and prior is not None:  # the weak tie to the metadata
+            rows.append((j, k))
+            targets.append(prior[k] - prior[j])
+            weights.append(PRIOR_WEIGHT)
     design = np.zeros((len(rows) + 1, count))
     for r, (j, k) in enumerate(rows):
         design[r, j], design[r, k] = -weights[r], weights[r]

@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from hdrio.io.staging import candidate_stride, release, strided_copy
+from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.grouped import group_medians
 from hdrio.radiometry.noise import (
@@ -264,11 +265,14 @@ def fit_noise(codes: np.ndarray, exposures, response: CameraResponse,
     slope2 = code_slope(response) ** 2
     fitted = np.zeros((len(TERMS), channels))
     used, seen = 0, np.zeros(channels, bool)
-    for c in range(channels):
+
+    def channel_fit(c: int) -> tuple[tuple | None, np.ndarray | None]:
         pairs = _pairs(grid, near, times, X, slope2, c, response.code_max) \
             if count > 1 else None
-        theta = None if pairs is None else _fit_channel(
+        return pairs, None if pairs is None else _fit_channel(
             pairs, response, c, np.array([floors[term][c] for term in TERMS]))
+
+    for c, (pairs, theta) in enumerate(map_on_threads(channel_fit, list(range(channels)))):
         if theta is not None:
             fitted[:4, c], seen[c] = theta, True
             used += pairs[1].size
