@@ -101,7 +101,8 @@ def test_the_file_and_its_check_do_not_depend_on_the_threads(tmp_path, monkeypat
         monkeypatch.setenv("HDRIO_THREADS", budget)
         check = StreamingCheck()
         path = tmp_path / f"b{budget}.exr"
-        write_exr(path, rgb, {"hdrio:units": "relative"}, scale=0.5, layers=extra,
+        write_exr(path, rgb, {"hdrio:units": "relative", "DateTime": "2026:01:01 00:00:00"},
+                  scale=0.5, layers=extra,
                   observe=check.add)
         written[budget] = path.read_bytes()
         reports[budget] = check.report()
