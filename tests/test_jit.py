@@ -98,3 +98,30 @@ def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
     jit._finished.add("merge")  # said by the process, waited for
     jit.compile_ahead("reinhard-local", merge=lambda: True)
     assert started == [["merge", "preview=reinhard-global"]]
+
+
+_WARM_UP = """
+import os, sys
+from hdrio import jit
+jit.warm_up("colorsys")
+thread = jit._warming
+if thread is None:
+    print("none")
+else:
+    thread.join()
+    from numba.core.registry import cpu_target
+    # numba's NumPy lowering registered, the module imported, by the background thread
+    print("colorsys" in sys.modules, len(cpu_target.target_context._registries) > 5)
+jit.warm_up("colorsys")
+print(jit._warming is thread)
+"""
+
+
+@pytest.mark.parametrize("budget", ["1", "2"])
+def test_the_warm_up_prepares_numba_and_imports_once_on_two_cpus_or_more(budget):
+    # A fresh process: the warm-up is once per process, and on one CPU nothing (a second
+    # thread would only take turns with the first).
+    printed = subprocess.run([sys.executable, "-c", _WARM_UP], capture_output=True,
+                             text=True, check=True,
+                             env={**os.environ, "HDRIO_THREADS": budget}).stdout.split()
+    assert printed == (["none", "True"] if budget == "1" else ["True", "True", "True"])

@@ -127,6 +127,25 @@ def test_a_worker_environment_sizes_every_pool():
     assert worker_environment(0)["HDRIO_THREADS"] == "1"
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+@pytest.mark.parametrize("exported", [None, "8"])
+def test_heap_arenas_are_limited_unless_the_user_chose(exported):
+    # In a fresh process, as the command's entry and a pool worker's start call it; a
+    # user's MALLOC_ARENA_MAX (which glibc read at start) is left as it is. Dask's local
+    # workers get the variable in their environment.
+    from hdrio.parallel import HEAP_ARENAS
+
+    environment = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    if exported:
+        environment["MALLOC_ARENA_MAX"] = exported
+    printed = subprocess.run(
+        [sys.executable, "-c", "from hdrio.parallel import limit_heap_arenas as l; "
+                               "print(l())"], capture_output=True, text=True, check=True,
+        env=environment).stdout.strip()
+    assert printed == ("False" if exported else "True")
+    assert worker_environment(2)["MALLOC_ARENA_MAX"] == str(HEAP_ARENAS)
+
+
 def test_numba_parallel_kernels_follow_the_budget(monkeypatch):
     import numba
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from hdrio.batch.journal import record_done
 from hdrio.batch.partial import clean_partials
 from hdrio.batch.tasks import SetTask
-from hdrio.parallel import die_with_parent, worker_environment
+from hdrio.parallel import die_with_parent, limit_heap_arenas, worker_environment
 
 Work = Callable[[SetTask], tuple[bool, str]]
 OnResult = Callable[["SetResult", int, int], None]
@@ -110,6 +110,7 @@ def _start_worker(parent_pid: int, threads: int) -> None:
     die_with_parent(parent_pid)
     for name, value in worker_environment(threads).items():
         os.environ.setdefault(name, value)
+    limit_heap_arenas()  # before the merge's threads start (the variable came too late)
 
 
 def run_local(tasks: Sequence[SetTask], work: Work, workers: int,

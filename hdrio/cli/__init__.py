@@ -19,6 +19,7 @@ from hdrio import __version__
 from hdrio.cli import check, export_response
 from hdrio.cli.usage import Parser, UsageError
 from hdrio.errors import HdrioError
+from hdrio.parallel import limit_heap_arenas
 
 # colour-science warns at import when Matplotlib is absent; only its plotting needs it
 # (hdrio's --plot-* say so themselves), so it is not the user's business on every run.
@@ -93,7 +94,9 @@ def run() -> None:
     printed (2 cores; docs/speed.md). Everything hdrio opens is closed before
     :func:`main` returns: outputs are renamed into place, staged brackets are in an
     unlinked file, process pools and Dask clusters are shut down, compile-ahead
-    helpers end with their parent."""
+    helpers end with their parent. glibc's heap arenas are held to a few first
+    (:func:`hdrio.parallel.limit_heap_arenas`)."""
+    limit_heap_arenas()
     code = main()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(OSError, ValueError):
