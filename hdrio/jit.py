@@ -78,7 +78,8 @@ def size_numba_threads() -> None:
 
 
 STAGES: dict[str, tuple[str, ...]] = {
-    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise_fit:_clipped_near"),
+    "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise_fit:_clipped_near",
+              "hdrio.io.half:_to_half_values"),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.consistency:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
 }
