@@ -66,7 +66,11 @@ def code_range(codes: np.ndarray) -> tuple[int, int]:
 def classify(codes: np.ndarray, code_max: int) -> str:
     """``"dark"`` or ``"bright"`` (no code well exposed), ``"covers"`` (every code inside
     :data:`COVERING`) or ``"mixed"``."""
-    low, high = code_range(codes)
+    return classify_range(*code_range(codes), code_max)
+
+
+def classify_range(low: int, high: int, code_max: int) -> str:
+    """:func:`classify` of a bracket whose codes span ``low .. high``."""
     well_low, well_high = well_exposed_codes(code_max)
     if high < well_low:
         return "dark"

@@ -65,9 +65,9 @@ def test_brackets_beyond_the_scene_are_dropped_and_not_decoded(tmp_path, monkeyp
     decoded = []
     original = brackets_module._decode_into
 
-    def counting(image, header, out):
+    def counting(image, header, out, *rest):
         decoded.append(header.path.name)
-        original(image, header, out)
+        return original(image, header, out, *rest)
 
     monkeypatch.setattr(brackets_module, "_decode_into", counting)
     kept = read_brackets(paths, exposures=exposures)
@@ -161,8 +161,9 @@ def test_covered_with_saved_response_decodes_one_bracket(tmp_path, monkeypatch):
     decoded = []
     original = brackets_module._decode_into
     monkeypatch.setattr(brackets_module, "_decode_into",
-                        lambda image, header, out: (decoded.append(header.path.name),
-                                                    original(image, header, out)))
+                        lambda image, header, out, *rest: (decoded.append(header.path.name),
+                                                           original(image, header, out,
+                                                                    *rest))[1])
     result = merge_files(paths, tmp_path / "second.exr", exposures=exposures,
                          options=MergeOptions(response_from=str(first)))
     assert decoded == ["b2.png"] and result.stack.count == 1

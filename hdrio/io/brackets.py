@@ -25,18 +25,13 @@ from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
 from hdrio.parallel import threads
-from hdrio.skips import classify
+from hdrio.skips import classify_range, code_range
 from hdrio.stack import ExposureStack
 
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
 
 
 _ROWS_PER_READ = 256
-DECODING_BYTES = 320 << 20
-"""Decoded bytes of brackets in flight at once (each one's pages stay resident until it
-is staged and released): with a thread per bracket, 9 x 24 MP brackets decoding at once
-on 16 cores took a merge's peak from 566 MB (2 threads) to 846 MB. At least two brackets
-decode at once whatever their size."""
 PLACEHOLDERS = "data"
 """The exposure source of brackets read with no metadata (``infer_exposures``): their
 exposures are placeholders until :func:`hdrio.merge.ladder.infer_exposures`."""
@@ -121,16 +116,27 @@ def read_header(path: str | Path) -> BracketHeader:
         return header
 
 
-def _decode_into(image, header: BracketHeader, out: np.ndarray) -> None:
-    """Decode ``image`` into ``out`` ``(H, W, C)`` a band of rows at a time (no full copy)."""
+def _decode_into(image, header: BracketHeader, out: np.ndarray,
+                 decoded: Callable[[int, int], None] | None = None) -> tuple[int, int]:
+    """Decode ``image`` into ``out`` ``(H, W, C)`` a band of rows at a time (no full
+    copy); ``decoded(top, bottom)`` after each band (a staged bracket gives its pages
+    back there). Returns the smallest and largest code, counted band by band."""
     base = str(np.dtype(header.dtype))
+    low, high = None, None
     for top in range(0, header.height, _ROWS_PER_READ):
         bottom = min(header.height, top + _ROWS_PER_READ)
         rows = image.read_scanlines(0, 0, top, bottom, 0, 0, header.channels, base)
         if rows is None or image.has_error:
             raise InputError(header.path, "cannot decode image "
                              f"({library_message(image.geterror) or 'read failed'})")
-        out[top:bottom] = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
+        band = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
+        out[top:bottom] = band
+        band_low, band_high = code_range(band)
+        low = band_low if low is None else min(low, band_low)
+        high = band_high if high is None else max(high, band_high)
+        if decoded is not None:
+            decoded(top, bottom)
+    return low, high
 
 
 def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
@@ -235,9 +241,11 @@ def read_brackets(
         with _open(paths[j]) as (image, header):
             if header.shape != first.shape or header.code_max != first.code_max:
                 raise InputError(paths[j], "changed while being read")
-            _decode_into(image, header, codes[position])
-        kinds[position] = classify(codes[position], first.code_max)
-        release(codes, position)
+            # each band's pages given back once written: a bracket decoding holds one band
+            low, high = _decode_into(image, header, codes[position], lambda top, bottom:
+                                     release(codes, position, top, bottom))
+        kinds[position] = classify_range(low, high, first.code_max)
+        release(codes, position)  # the pages the bands shared
         with lock:
             decoded.add(position)
             if skip_brackets:
@@ -249,8 +257,7 @@ def read_brackets(
                 progress(done[0], count, str(paths[j]))
 
     # From the middle of the ladder outwards, alternating sides (nearest first), on as
-    # many threads as the process may use (OpenImageIO releases the GIL while decoding)
-    # and DECODING_BYTES allow:
+    # many threads as the process may use (OpenImageIO releases the GIL while decoding):
     # each side stops where it turns all dark or all bright, and a bracket beyond that is
     # not decoded unless a thread had already started it.
     middle = count // 2
@@ -273,8 +280,7 @@ def read_brackets(
                 failed.append(error)
                 raise
 
-    bracket_bytes = max(1, codes[0].nbytes)
-    workers = max(1, min(threads(), len(queue), max(2, DECODING_BYTES // bracket_bytes)))
+    workers = max(1, min(threads(), len(queue)))
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="hdrio-read") as pool:
         for future in [pool.submit(worker) for _ in range(workers)]:
             future.result()
