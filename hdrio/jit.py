@@ -27,6 +27,10 @@ costs about 0.05 s of a first run's compile), and no cache file of its own to wr
 cached kernel holds the code of every helper it calls. Such a helper cannot be called
 from Python."""
 
+_warming: threading.Thread | None = None
+"""The thread :func:`warm_up` started in this process (None before)."""
+
+
 def warm_up(*modules: str) -> None:
     """Prepare, on a background thread, what a merge's later stages load on first use:
     numba's CPU target, then ``modules`` (imported). Once per process; nothing on one
@@ -61,9 +65,6 @@ def warm_up(*modules: str) -> None:
 
     _warming = threading.Thread(target=prepare, name="hdrio-warm-up", daemon=True)
     _warming.start()
-
-
-_warming: threading.Thread | None = None
 
 
 def size_numba_threads() -> None:

@@ -61,18 +61,25 @@ def half_value(bits):
     return bits_float(sign | ((exponent + 112) << 23) | (significand << 13))
 
 
+@njit(inline="always", **INNER)
+def _scaled_half(value, scale, low, high):
+    """The half bits of ``value * scale`` clipped to ``[low, high]`` in float32 (NaN
+    stays NaN, as ``numpy.clip`` leaves it)."""
+    value = value * scale
+    if value < low:
+        value = low
+    elif value > high:
+        value = high
+    return half_bits(value)
+
+
 @njit(cache=True, nogil=True)
 def _to_half_values(source, scale, low, high, out, stored):
     """:func:`_to_half_rows` of flat values sharing one channel's numbers (a loop the
     compiler vectorises: 1.2 ns a value on one core, against 8 for NumPy's ``astype``)."""
     keep = stored.size == source.size
     for i in range(source.size):
-        value = source[i] * scale
-        if value < low:
-            value = low
-        elif value > high:
-            value = high
-        bits = half_bits(value)
+        bits = _scaled_half(source[i], scale, low, high)
         out[i] = bits
         if keep:
             stored[i] = half_value(bits)
@@ -81,18 +88,13 @@ def _to_half_values(source, scale, low, high, out, stored):
 @njit(cache=True, nogil=True)
 def _to_half_rows(source, scales, lows, highs, out, stored):
     """``out[y, x, c]`` the half bits of ``source[y, x, c] * scales[c]`` clipped to
-    ``[lows[c], highs[c]]`` (NaN stays NaN, as ``numpy.clip`` leaves it); ``stored``, when
-    of ``source``'s size, the float32 value of each half."""
+    ``[lows[c], highs[c]]``; ``stored``, when of ``source``'s size, the float32 value of
+    each half."""
     keep = stored.size == source.size
     for y in range(source.shape[0]):
         for x in range(source.shape[1]):
             for c in range(source.shape[2]):
-                value = source[y, x, c] * scales[c]
-                if value < lows[c]:
-                    value = lows[c]
-                elif value > highs[c]:
-                    value = highs[c]
-                bits = half_bits(value)
+                bits = _scaled_half(source[y, x, c], scales[c], lows[c], highs[c])
                 out[y, x, c] = bits
                 if keep:
                     stored[y, x, c] = half_value(bits)
