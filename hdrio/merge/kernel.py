@@ -210,7 +210,8 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
             out[i + 1] = top if u else z1
             out[i + 2] = top if u else z2
         return
-    out[:] = row
+    for i in range(row.size):  # element by element: hdrio.jit, "Slice copies"
+        out[i] = row[i]
     if rule == 0:
         return
     shorter = codes[max(j - 1, 0), y]

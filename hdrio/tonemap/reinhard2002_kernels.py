@@ -283,7 +283,8 @@ def _blur_rows(L_m: np.ndarray, y0: int, kernel: np.ndarray, vertical: np.ndarra
     line = padded[: width + 2 * r]
     for j in range(rows):  # horizontal pass, through a row padded with its mirror image
         row = vertical[j]
-        line[r: r + width] = row
+        for x in range(width):  # element by element: hdrio.jit, "Slice copies"
+            line[r + x] = row[x]
         for x in range(r):
             line[x] = row[_mirror(x - r, width)]
             line[r + width + x] = row[_mirror(width + x, width)]
@@ -332,7 +333,9 @@ def _local_tile(rgb: np.ndarray, out: np.ndarray, weights: np.ndarray, L_m: np.n
     open_ = open_[:size]
     open_[:] = True
     _blur_rows(L_m, y0, kernels[0, : 2 * radii[0] + 1], vertical, padded, v1)
-    chosen[:] = v1.reshape(size)
+    first = v1.reshape(size)
+    for p in range(size):  # element by element: hdrio.jit, "Slice copies"
+        chosen[p] = first[p]
     for i in range(kernels.shape[0] - 1):
         _blur_rows(L_m, y0, kernels[i + 1, : 2 * radii[i + 1] + 1], vertical, padded, v1_next)
         if _select(v1.reshape(size), v1_next.reshape(size), chosen, open_, surround[i],
