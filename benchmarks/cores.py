@@ -39,7 +39,7 @@ import numpy as np
 
 from benchmarks import farm
 from benchmarks.speed.endtoend import write_jpegs
-from benchmarks.speed.process import _FLOOR, demo_rows, hdrio_command, timed
+from benchmarks.speed.process import demo_rows, floor_command, hdrio_command, timed
 from benchmarks.speed.scene import bracket_stack
 from hdrio.io.images import read_image
 
@@ -78,8 +78,7 @@ def merge_rows(paths: list[str], exposures: list[str], folder: Path, cores: list
     seven = slice(1, 8)
     merge = [*hdrio, "merge", *paths[seven], "--exposures", ",".join(exposures[seven]),
              "-o", str(folder / "merge7.exr"), "-q"]
-    floor = [sys.executable, "-c", _FLOOR, *paths[seven], str(folder / "written.npy"),
-             str(folder / "floor.exr")]
+    floor = floor_command(paths[seven], folder / "written.npy", folder / "floor.exr")
     rows = []
     for count in cores:
         runs = {"floor": [], "merge": []}

@@ -65,6 +65,13 @@ out.close()
 """
 
 
+def floor_command(paths, written: str | Path, output: str | Path) -> list[str]:
+    """The I/O floor as a process: decode ``paths`` (JPEGs), write one half EXR to
+    ``output`` of the pixels saved in ``written`` (a ``.npy``), or of the last JPEG's
+    values with ``written`` ``"jpeg-values"``."""
+    return [sys.executable, "-c", _FLOOR, *map(str, paths), str(written), str(output)]
+
+
 def hdrio_command() -> list[str]:
     """``hdrio`` as installed beside this interpreter (the console script users type)."""
     script = Path(sys.executable).parent / "hdrio"
@@ -118,8 +125,8 @@ def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 
             first = (len(paths) - count) // 2
             chosen = slice(first, first + count)
             output = folder / f"merge{count}.exr"
-            floor = _median([sys.executable, "-c", _FLOOR, *paths[chosen], str(written),
-                             str(folder / "floor.exr")], repeats)
+            floor = _median(floor_command(paths[chosen], written, folder / "floor.exr"),
+                            repeats)
             merge = _median([*hdrio, "merge", *paths[chosen], "--exposures",
                              ",".join(exposures[chosen]), "-o", str(output), "-q"], repeats)
             rows.append({"row": "process", "method": f"I/O floor process, {count} JPEGs "
@@ -129,8 +136,8 @@ def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 
             rows.append({"row": "process", "method": f"hdrio merge, {count} JPEGs -> half "
                          "EXR", "seconds": merge["seconds"], "cpu_seconds": merge["cpu_seconds"],
                          "process_peak_mb": merge["peak_mb"], "merge_of": count})
-        jpeg_floor = _median([sys.executable, "-c", _FLOOR, *paths[1:8], "jpeg-values",
-                              str(folder / "floor.exr")], repeats)
+        jpeg_floor = _median(floor_command(paths[1:8], "jpeg-values", folder / "floor.exr"),
+                             repeats)
         rows.append({"row": "process", "method": "older floor, 7 JPEGs (writes the JPEG "
                      "values, not hdrio's pixels)", "seconds": jpeg_floor["seconds"],
                      "cpu_seconds": jpeg_floor["cpu_seconds"],
