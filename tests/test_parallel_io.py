@@ -145,6 +145,23 @@ def test_heap_arenas_are_limited_unless_the_user_chose(exported):
     assert worker_environment(2)["MALLOC_ARENA_MAX"] == str(HEAP_ARENAS)
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_a_pool_worker_limits_its_heap_arenas_before_it_exports_the_variable():
+    # The worker sets MALLOC_ARENA_MAX for its own children; asked after that, the limit
+    # took the variable for the user's choice and was never applied in a pool worker.
+    environment = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    script = ("import os\n"
+              "import hdrio.batch.pool as pool, hdrio.parallel as parallel\n"
+              "applied = []\n"
+              "limit = parallel.limit_heap_arenas\n"
+              "pool.limit_heap_arenas = lambda: applied.append(limit()) or applied[-1]\n"
+              "pool._start_worker(os.getppid(), 2)\n"
+              "print(applied, os.environ['MALLOC_ARENA_MAX'])\n")
+    printed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                             check=True, env=environment).stdout.strip()
+    assert printed == "[True] 4"
+
+
 def test_numba_parallel_kernels_follow_the_budget(monkeypatch):
     import numba
 

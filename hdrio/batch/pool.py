@@ -108,9 +108,11 @@ def worker_threads(workers: int) -> int:
 
 def _start_worker(parent_pid: int, threads: int) -> None:
     die_with_parent(parent_pid)
+    # Before the variables below: MALLOC_ARENA_MAX set by them would read as the user's
+    # own choice, and glibc has read the environment already (before the merge's threads).
+    limit_heap_arenas()
     for name, value in worker_environment(threads).items():
         os.environ.setdefault(name, value)
-    limit_heap_arenas()  # before the merge's threads start (the variable came too late)
 
 
 def run_local(tasks: Sequence[SetTask], work: Work, workers: int,

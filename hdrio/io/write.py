@@ -274,10 +274,10 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
         -HALF_MAX] * (count - own)
     highs = [HALF_MAX] * count
 
-    from hdrio.io.half import to_half  # numba: not for the commands that write no EXR
-
     def band(rows: np.ndarray) -> np.ndarray:
         if pixel_type == "half":  # on every core, each piece observed where it is made
+            from hdrio.io.half import to_half  # numba: only for half EXRs
+
             return to_half(rows, scales, lows, highs, observe and (lambda done: observe(
                 done[..., :own])))
         rows = np.array(rows, dtype=np.float32)
