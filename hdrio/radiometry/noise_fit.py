@@ -4,13 +4,14 @@ Fit (:func:`fit_noise`): for pixels seen in two neighbouring brackets, the two e
 ``x_j`` and ``x_{j+1}`` of the same radiance differ by noise alone, so ``var(x_{j+1} -
 x_j) = var(x_j) + var(x_{j+1})``, linear in the four terms. Each pair's disagreement is
 divided by its predicted standard deviation; the pairs of every bracket pair are pooled
-into bins of brightness, and in each bin the robust spread (the median absolute
-deviation, about each bracket pair's median: an exposure time's error is not noise)
-should be 1. The terms are fitted in log space so that every bin counts alike (a robust
-Levenberg-Marquardt fit, Cauchy weights), then the prediction is divided by the measured
-spread and fitted again, until the two agree: ``benchmarks/noise_model.py`` measures the
-result per decile of brightness. Pixels within :data:`CLIP_RADIUS` of a clipped channel
-are left out (a camera bends the channels next to a clip; deghosting ignores them too).
+into bins of brightness, and in each bin the robust spread about 0
+(:func:`robust_spread`: a constant offset between two brackets, an exposure time's
+error, counts as disagreement too) should be 1. The terms are fitted in log space so
+that every bin counts alike (a robust Levenberg-Marquardt fit, Cauchy weights), then the
+prediction is divided by the measured spread and fitted again, until the two agree:
+``benchmarks/noise_model.py`` measures the result per decile of brightness. Pixels
+within :data:`CLIP_RADIUS` of a clipped channel are left out (a camera bends the
+channels next to a clip; deghosting ignores them too).
 
 A term the data cannot fix takes the floor of the encoding
 (:func:`hdrio.radiometry.noise.encoding_floors`), never zero.
@@ -46,7 +47,6 @@ pixels, in either bracket of a pair, stay out of the fit (a camera's highlight r
 JPEG's half-resolution chroma next to a clip), and so do those codes themselves."""
 
 _BINS = 20  # pooled bins of brightness, per channel
-_PAIR_BINS = 16  # bins per bracket pair for the starting fit
 _MIN_PER_BIN = 24  # a spread from fewer pairs is too rough to fit
 _MAX_PAIRS = 16_000  # pairs a channel's fit reads (every k-th beyond)
 _ROUNDS = 10  # steps that bring the measured spread to 1 in every bin
@@ -136,8 +136,6 @@ def robust_spread(scores: np.ndarray, groups: np.ndarray, count: int,
     magnitude = np.abs(scores)
     limits = trim_limits(scores, groups, count) if limits is None else limits
     kept = magnitude <= limits[groups]
-    if __import__("os").environ.get("HDRIO_MAD") == "1":
-        return _MAD_TO_SIGMA * np.nan_to_num(group_medians(magnitude, groups, count))
     total = np.bincount(groups, magnitude * kept, count)
     return np.sqrt(np.pi / 2) * total / np.maximum(np.bincount(groups, kept, count), 1)
 
@@ -146,7 +144,7 @@ def _fit_channel(pairs, response, c, floors):
     """The four fitted terms of one channel (module docstring), each at least its floor
     (``floors``: ``(4,)``, and ``common``, the JPEG term, for the usable codes), or
     ``None`` when too few bins can be measured."""
-    R, difference, brightness, pair, zs, zl = pairs
+    R, difference, brightness, _, zs, zl = pairs
     floor, common = floors[:4], np.full(response.channels, floors[4])  # (C,): as a model's
     if difference.size < 3 * _MIN_PER_BIN:
         return None
@@ -182,9 +180,6 @@ def _fit_channel(pairs, response, c, floors):
         by ``theta`` (``groups`` and the trim ``limits`` held for a round: an objective
         whose pairs moved with ``theta`` rewarded a model that left bins empty)."""
         scores = difference / np.sqrt(R @ (floor + np.exp(phi) / scale))
-        if __import__("os").environ.get("HDRIO_CENTRE") == "1":
-            key = groups * 64 + pair
-            scores = scores - np.nan_to_num(group_medians(scores, key, (_BINS + 1) * 64))[key]
         with np.errstate(divide="ignore"):
             return np.log(robust_spread(scores, groups, _BINS + 1, limits)[:_BINS])
 
