@@ -150,12 +150,10 @@ def cell_factors(codes: np.ndarray, reference: int, tables: ResamplingTables, li
 def _cell_factors(start, stop, codes, reference, estimates, noise, allowed, limits, scales,
                   todo, cell, first, edge, out):  # pragma: no cover - compiled
     """Cell rows ``start .. stop - 1`` (of the band from cell row ``first``) of
-    :func:`cell_factors`: a cell's samples read once, the channels' sums side by side."""
+    :func:`cell_factors`: per channel, the excess disagreement, its allowance, the
+    samples usable in both, the noise variance, the Laplacian energy and the samples usable."""
     count, height, width, channels = codes.shape
     half = STRIDE // 2
-    # Per channel: excess disagreement, its allowance, samples both usable, noise
-    # variance, Laplacian energy, samples usable.
-    sums = np.empty((6, channels))
     for cy in range(start, stop):
         y0 = (first + cy) * cell
         y1 = min(height, y0 + cell)
@@ -184,16 +182,19 @@ def _cell_factors(start, stop, codes, reference, estimates, noise, allowed, limi
                 if not sharp:
                     continue
                 scale = scales[j]
-                for k in range(6):
-                    for c in range(channels):
-                        sums[k, c] = 0.0
-                samples = 0.0
-                for y in range(y0 + half, y1, STRIDE):
-                    up, down = max(y - 1, 0), min(y + 1, height - 1)
-                    for x in range(x0 + half, x1, STRIDE):
-                        left, right = max(x - 1, 0), min(x + 1, width - 1)
-                        samples += 1.0
-                        for c in range(channels):
+                samples = float(len(range(y0 + half, y1, STRIDE))
+                                * len(range(x0 + half, x1, STRIDE)))
+                factor = 1.0
+                # Channel by channel, the sums in local variables: accumulated in an
+                # array, every sample stored them to memory (the arrays may alias, so
+                # nothing stayed in registers).
+                for c in range(channels):
+                    excess = allowance = both = energy = 0.0
+                    noise_sum = usable = 0.0
+                    for y in range(y0 + half, y1, STRIDE):
+                        up, down = max(y - 1, 0), min(y + 1, height - 1)
+                        for x in range(x0 + half, x1, STRIDE):
+                            left, right = max(x - 1, 0), min(x + 1, width - 1)
                             z = codes[j, y, x, c]
                             if z >= limits[c]:
                                 continue
@@ -203,20 +204,16 @@ def _cell_factors(start, stop, codes, reference, estimates, noise, allowed, limi
                             if np.isfinite(a) and zr < limits[c]:
                                 a *= scale
                                 d = e - estimates[reference, c, zr]
-                                sums[0, c] += d * d - a
-                                sums[1, c] += a
-                                sums[2, c] += 1.0
+                                excess += d * d - a
+                                allowance += a
+                                both += 1.0
                             h = e - 0.25 * (estimates[j, c, codes[j, up, x, c]]
                                             + estimates[j, c, codes[j, down, x, c]]
                                             + estimates[j, c, codes[j, y, left, c]]
                                             + estimates[j, c, codes[j, y, right, c]])
-                            sums[3, c] += scale * noise[j, c, z]
-                            sums[4, c] += h * h
-                            sums[5, c] += 1.0
-                factor = 1.0
-                for c in range(channels):
-                    excess, allowance, both = sums[0, c], sums[1, c], sums[2, c]
-                    usable = sums[5, c]
+                            noise_sum += scale * noise[j, c, z]
+                            energy += h * h
+                            usable += 1.0
                     if usable == 0.0:
                         continue
                     if both > COVERED * samples:
@@ -226,9 +223,9 @@ def _cell_factors(start, stop, codes, reference, estimates, noise, allowed, limi
                         resample = max(0.0, (excess - SIGNIFICANCE * math.sqrt(2.0 / both)
                                              * allowance) / both)
                     else:
-                        resample = sums[4, c] / usable
+                        resample = energy / usable
                     if resample > 0.0:
-                        v = sums[3, c] / usable
+                        v = noise_sum / usable
                         f = v / (v + resample)
                         if np.isfinite(f) and f < factor:
                             factor = f

@@ -224,7 +224,7 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
         if not near:
             continue
         dropped = dropped_channels(row, shorter, base, j, max(j - 1, 0), limits, gates,
-                                    rule, neutral, estimates, variances, threshold)
+                                    rule, neutral, estimates, variances, threshold, 1.0)
         for c in range(channels):
             if (dropped >> c) & 1:
                 out[base + c] = top

@@ -64,7 +64,6 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
         held = np.empty(count)
         dropped = np.empty(count, dtype=np.int64)
         values = np.empty(channels)
-        loosened = threshold.copy()
         for cx in range(cols):
             if not touched[cy, cx]:
                 continue
@@ -88,18 +87,16 @@ def _remerge(codes, keep, touched, cell, terms, estimates, policy, log_domain, o
                         if j > 0 and held[k] < 0.5 and rule == 2:
                             dropped[j] = 0  # no shorter bracket kept: nothing to test
                             continue
-                        allowed = threshold
+                        loosen = 1.0
                         if scaled and j > 0:
                             # A resampling factor f is noise / (noise + resampling
                             # error): the two brackets disagree by that much more.
                             f = max(min(factors[j, cy, cx], factors[k, cy, cx]), 1e-3)
                             if f < 1.0:
-                                for c in range(channels):
-                                    loosened[j, c] = threshold[j, c] / f
-                                allowed = loosened
+                                loosen = f
                         dropped[j] = dropped_channels(
                             codes[j, y, x], codes[k, y, x], 0, j, k, limits, gates,
-                            rule, neutral, clip_estimates, variances, allowed)
+                            rule, neutral, clip_estimates, variances, threshold, loosen)
                     for c in range(channels):
                         numerator = 0.0
                         denominator = 0.0

@@ -64,7 +64,7 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
                 if z >= limits[c] or (dropped_channels(
                         row, codes[max(kept - 1, 0), y], x * channels, kept,
                         max(kept - 1, 0), limits, gates, rule, neutral, clip_estimates,
-                        clip_variances, threshold) >> c) & 1 == 1:
+                        clip_variances, threshold, 1.0) >> c) & 1 == 1:
                     break
                 w = weights[kept, c, z]
                 if w > 0.0:

@@ -143,7 +143,7 @@ def clip_tables(response: CameraResponse, exposures, noise: NoiseModel,
 
 @njit(inline="always", **INNER)
 def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, estimates,
-                     variances, threshold):  # pragma: no cover - compiled
+                     variances, threshold, loosen):  # pragma: no cover - compiled
     """The channels of bracket ``j``'s observation at the pixel whose channels start at
     ``longer[base]`` that the policy drops besides those at or above their limits, as
     a bit set (bit ``c``: channel ``c``; every bit: the whole observation); ``shorter``
@@ -152,12 +152,16 @@ def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, 
     read only for ``j >= 1``).
 
     The policy's parts are :meth:`hdrio.merge.saturation.ClipPolicy.kernel_args`,
-    ``(limits, gates, rule, neutral, estimates, variances, thresholds)``, the
-    thresholds ``(P, C)`` the squared disagreement each pair of brackets and channel
-    allows, in variances. A kernel unpacks that tuple once, outside its loops, and
-    passes the parts: the tuple handed to a function called per pixel costs an atomic
-    reference count per array and call, which the threads then contend for (6 s of a
-    24 MP merge's 7)."""
+    ``(limits, gates, rule, neutral, estimates, variances, thresholds)``, the thresholds
+    ``(P, C)`` the squared disagreement each pair of brackets and channel allows, in
+    variances; ``loosen`` divides them (a resampled bracket's factor, below 1:
+    :func:`hdrio.merge.masked.remerge_masked`; 1 elsewhere, which leaves them exactly as
+    they are). A scalar, not a per-pixel copy of the thresholds: writing one for every
+    observation took half of the masked re-merge's time. A kernel unpacks that tuple
+    once, outside its loops, and passes the parts: the tuple handed to a function called
+    per pixel costs an atomic reference count per array and call, which the threads then
+    contend for (6 s of a 24 MP merge's 7).
+    """
     channels = limits.size
     whole = (1 << channels) - 1
     clipped = 0
@@ -179,8 +183,9 @@ def dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral, 
             continue
         shorter_x = estimates[k, c, y]
         d = estimates[j, c, z] - shorter_x
+        allowed = threshold[j, c] / loosen
         if (y >= limits[c] or shorter_x > REACH * estimates[j, c, limits[c]]
-                or d * d > threshold[j, c] * (variances[j, c, z] + variances[k, c, y])):
+                or d * d > allowed * (variances[j, c, z] + variances[k, c, y])):
             return whole
     return 0
 
@@ -195,7 +200,7 @@ def dropped_channels_call(longer, shorter, base, j, k, limits, gates, rule, neut
     :func:`dropped_channels`: a call passes its arrays with a reference count each, which
     the threads contend for.)"""
     return dropped_channels(longer, shorter, base, j, k, limits, gates, rule, neutral,
-                            estimates, variances, threshold)
+                            estimates, variances, threshold, 1.0)
 
 
 def untested(code_max: int, channels: int) -> tuple:
