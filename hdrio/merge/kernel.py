@@ -195,7 +195,11 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
     the policy (a channel at or above its limit they drop themselves). The pixel rule
     in one pass written so that it vectorises; the clip test copies the row and tests
     only the observations with a channel at or above its gate, or below its limit where
-    the shorter bracket is at it."""
+    the shorter bracket is at it. With three channels that look reads the limits and
+    gates from variables, not from their arrays at every pixel: the kernel's CPU on the
+    7 x 24 MP speed set, one thread, went from 2.92-3.14 s to 2.15-2.32 s. (Marking
+    the observations to test in a first pass and testing them in a second took 10.4
+    s.)"""
     limits, gates, rule, neutral, estimates, variances, threshold = policy
     channels = limits.size
     row = codes[j, y]
@@ -215,6 +219,25 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
     if rule == 0:
         return
     shorter = codes[max(j - 1, 0), y]
+    if channels == 3:
+        l0, l1, l2 = limits[0], limits[1], limits[2]
+        g0, g1, g2 = gates[0], gates[1], gates[2]
+        for x in range(row.size // 3):
+            i = 3 * x
+            z0, z1, z2 = row[i], row[i + 1], row[i + 2]
+            s0, s1, s2 = shorter[i], shorter[i + 1], shorter[i + 2]
+            if not ((z0 >= g0) | (z1 >= g1) | (z2 >= g2) | ((z0 < l0) & (s0 >= l0))
+                    | ((z1 < l1) & (s1 >= l1)) | ((z2 < l2) & (s2 >= l2))):
+                continue
+            dropped = dropped_channels(row, shorter, i, j, max(j - 1, 0), limits, gates,
+                                        rule, neutral, estimates, variances, threshold, 1.0)
+            if dropped & 1:
+                out[i] = top
+            if dropped & 2:
+                out[i + 1] = top
+            if dropped & 4:
+                out[i + 2] = top
+        return
     for x in range(row.size // channels):
         base = x * channels
         near = False
