@@ -77,7 +77,7 @@ from hdrio.merge.row_sums import (
     accumulate_by_pairs,
 )
 from hdrio.parallel import on_threads
-from hdrio.radiometry.cliptest import dropped_channels
+from hdrio.radiometry.cliptest import dropped_channels, dropped_channels_call
 
 MAX_BRACKETS = 64
 """Brackets one merge takes (more is never a real bracket set)."""
@@ -197,9 +197,10 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
     only the observations with a channel at or above its gate, or below its limit where
     the shorter bracket is at it. With three channels that look reads the limits and
     gates from variables, not from their arrays at every pixel: the kernel's CPU on the
-    7 x 24 MP speed set, one thread, went from 2.92-3.14 s to 2.15-2.32 s. (Marking
-    the observations to test in a first pass and testing them in a second took 10.4
-    s.)"""
+    7 x 24 MP speed set, one thread, went from 2.92-3.14 s to 2.15-2.32 s; the merge
+    stage's first compile from 15.0 to 17.4 s. (Marking the observations to test in a
+    first pass and testing them in a second took 10.4 s; one loop for every channel
+    count, the limits read from variables where there are three, 2.9-3.2 s.)"""
     limits, gates, rule, neutral, estimates, variances, threshold = policy
     channels = limits.size
     row = codes[j, y]
@@ -246,8 +247,11 @@ def _remap_row(codes, j, y, out, policy, code_max):  # pragma: no cover - compil
                 (row[base + k] < limits[k]) & (shorter[base + k] >= limits[k]))
         if not near:
             continue
-        dropped = dropped_channels(row, shorter, base, j, max(j - 1, 0), limits, gates,
-                                    rule, neutral, estimates, variances, threshold, 1.0)
+        # Called, not inlined: a second inlined copy of the test cost a first run 3.9 s
+        # of compiling, for the images that are not RGB.
+        dropped = dropped_channels_call(row, shorter, base, j, max(j - 1, 0), limits,
+                                        gates, rule, neutral, estimates, variances,
+                                        threshold)
         for c in range(channels):
             if (dropped >> c) & 1:
                 out[base + c] = top
