@@ -197,6 +197,28 @@ class _Candidates:
                         len(range(half, self.codes.shape[2], STRIDE))), bool)
         return _per_cell(grid, self.cell, *self.moving.shape)
 
+    def noise(self, bracket: int, box: tuple[slice, slice], region: np.ndarray) -> float:
+        """How noisy ``bracket``'s view of ``region`` (its cells within ``box``) is: the
+        median, over the region's samples, of its estimates' relative variance (the mean
+        over channels of ``variance / estimate^2``; ``inf`` where a channel says
+        nothing, clipped or black)."""
+        half, cell = STRIDE // 2, self.cell
+        rows, cols = box
+        view = self.codes[bracket, rows.start * cell + half:rows.stop * cell:STRIDE,
+                          cols.start * cell + half:cols.stop * cell:STRIDE]
+        per = cell // STRIDE
+        inside = np.repeat(np.repeat(region, per, axis=0), per, axis=1)
+        inside = inside[:view.shape[0], :view.shape[1]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relative = (self.tables.variance[bracket]
+                        / np.square(self.tables.estimates[bracket]))
+        relative[~np.isfinite(relative)] = np.inf
+        total = np.zeros(view.shape[:2])
+        for c in range(view.shape[2]):
+            total += relative[c][view[..., c]]
+        values = total[inside]
+        return float(np.median(values)) if values.size else np.inf
+
     def test(self, bracket: int):
         """:func:`cell_disagreement` against ``bracket`` over the moving cells."""
         if bracket not in self.tests:
@@ -229,6 +251,7 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
                                             for j in others):
         return reference, flagged
     best = (reference, flagged, -1 if clipped else support)
+    majority = []
     for k in others:
         if (clipped and np.count_nonzero(flagged[k] & core) > 0.5 * np.count_nonzero(core)
                 or candidates.clipped_fraction(k, box, region) > CLIPPED_SOURCE):
@@ -241,6 +264,12 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
                     for j in range(count) if j != k)
         if agree > best[2]:
             best = (k, against, agree)
+        if agree >= 0.5 * sum(int(np.count_nonzero(told[j] & core))
+                              for j in range(count) if j != k):
+            majority.append((candidates.noise(k, box, region), k, against))
+    if majority:
+        _, source, against = min(majority, key=lambda entry: entry[:2])
+        return source, against
     return best[0], best[1]
 
 
