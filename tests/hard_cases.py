@@ -257,6 +257,36 @@ def movers(crossing: int = 2, bright: bool = True, large: bool = True, frames: i
                    objects=objects, background=background)
 
 
+def walkers(ev: float = 1.0, seed: int = 0, moving: bool = True, frames: int = 3,
+            step: float = 0.35, height: int = 200, width: int = 300, scene: str = "Desk"
+            ) -> HardCase:
+    """A JPEG ladder ``ev`` apart and a dark figure (a tenth of the background's median,
+    textured, 45 % of the frame high and 12 % wide) in every bracket, each place
+    ``step`` of its width on from the last, so that the places overlap and no bracket shows the
+    background behind all of them (people walking through a hall; ``moving`` false: the
+    figure stands still). ``background`` is the scene without it."""
+    rng = np.random.default_rng(seed)
+    background = scene_crop(scene, height, width)
+    tall, wide = int(0.45 * height), int(0.12 * width)
+    noise = scipy.ndimage.gaussian_filter(rng.standard_normal((tall, wide)), 1.5)
+    texture = np.exp(0.35 * noise / noise.std())
+    figure = (0.1 * float(np.median(background.mean(axis=-1))) * texture
+              / np.median(texture))[..., None] * np.array([0.8, 0.9, 1.0])
+    top, left = int(0.3 * height), int(0.4 * width)
+    scenes, objects = [], []
+    for j in range(frames):
+        radiance = background.copy()
+        at = left + (round(j * step * wide) if moving else 0)
+        radiance[top:top + tall, at:at + wide] = figure
+        footprint = np.zeros((height, width), bool)
+        footprint[top:top + tall, at:at + wide] = True
+        scenes.append(radiance)
+        objects.append(footprint)
+    return _render(f"walkers_{ev:g}_{seed}{'' if moving else '_still'}", scenes,
+                   ladder(background, frames, ev), Camera(encoding="jpeg"), seed,
+                   objects=objects, background=background)
+
+
 def movers_kept(case: HardCase, radiance: np.ndarray, scale: float = 1.0) -> list[str]:
     """What the merge shows at each bracket's footprint of the object (the footprint's
     inner part, clear of the other footprints), by the median ``ln`` ratio of ``scale *
