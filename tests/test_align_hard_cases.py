@@ -45,8 +45,8 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     kept twice in 5 of these 12 cases, 'blends' in 6.
 
     The movers' region against the one bracket's scene it fits best, over the still
-    stack's error there: measured 1.2-1.9x for the bright objects (bound: the issue's
-    3x), 4.6-11.7x for the dark ones, kept from the one bracket that shows them, a few
+    stack's error there: measured 1.20-2.44x for the bright objects (bound: the issue's
+    3x), 2.48-11.26x for the dark ones, kept from the one bracket that shows them, a few
     codes above black (the issue's 3x not met there; bound here 15x); before: 4-47x."""
     case = movers(crossing=crossing, bright=bright, large=large)
     still = movers(crossing=0, bright=bright, large=large)
