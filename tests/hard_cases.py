@@ -287,6 +287,37 @@ def walkers(ev: float = 1.0, seed: int = 0, moving: bool = True, frames: int = 3
                    objects=objects, background=background)
 
 
+def hand_held_walkers(scene: str = "Desk", frames: int = 5, ev: float = 2.0, seed: int = 0,
+                      figure: bool = True, shift: float = 4.0, degrees: float = 0.2,
+                      height: int = 200, width: int = 300) -> HardCase:
+    """:func:`walkers`' figure (a tenth of the crop's median, textured) walking through a
+    hand-held JPEG ladder ``ev`` apart, every bracket moved by up to ``shift`` px and
+    ``degrees`` (``figure`` false: the same stack without it)."""
+    from tests.align_truth import SUPER, euclidean, view
+    from tests.align_truth import scene_crop as crop
+
+    rng = np.random.default_rng(seed)
+    hi = crop(scene, height, width, 40, 30)
+    tall, wide = int(0.45 * height), int(0.12 * width)
+    noise = scipy.ndimage.gaussian_filter(rng.standard_normal((tall * SUPER, wide * SUPER)), 3)
+    texture = np.exp(0.35 * noise / noise.std())
+    person = (0.1 * float(np.median(hi.mean(axis=-1))) * texture
+              / np.median(texture))[..., None] * np.array([0.8, 0.9, 1.0])
+    top, left = int(0.3 * height), int(0.35 * width)
+    warps = [euclidean(*rng.uniform(-shift, shift, 2), rng.uniform(-degrees, degrees),
+                       height, width) for _ in range(frames)]
+    scenes = []
+    for j in range(frames):
+        radiance = hi.copy()
+        if figure:
+            at = left + round(j * 0.35 * wide)
+            radiance[top * SUPER:(top + tall) * SUPER, at * SUPER:(at + wide) * SUPER] = person
+        scenes.append(view(radiance, warps[j]).astype(np.float64))
+    return _render(f"handheld_walkers_{scene}_{frames}_{seed}{'' if figure else '_empty'}",
+                   scenes, ladder(view(hi, np.eye(3)), frames, ev), Camera(encoding="jpeg"),
+                   seed, warps)
+
+
 def movers_kept(case: HardCase, radiance: np.ndarray, scale: float = 1.0) -> list[str]:
     """What the merge shows at each bracket's footprint of the object (the footprint's
     inner part, clear of the other footprints), by the median ``ln`` ratio of ``scale *
