@@ -121,6 +121,30 @@ def test_a_hand_held_stack_with_a_walker_is_registered(scene):
     assert not result.motion.alignment.refused and max(errors) < 0.5, errors
 
 
+@pytest.mark.parametrize("scene,frames,ev,seed", [
+    ("Desk", 3, 1.5, 1), ("StillLife", 5, 2.0, 0), ("StillLife", 5, 2.0, 1),
+    pytest.param("GoldenGate", 7, 2.0, 1, marks=pytest.mark.xfail(strict=True, reason=(
+        "a bracket registered 5.9 px off (docs/motion.md, 'Hand-held ladders of other "
+        "crops')")))])
+def test_a_hand_held_ladder_is_registered_or_refused(scene, frames, ev, seed):
+    """Generated hand-held JPEG ladders (:func:`tests.hard_cases.hand_held_walkers`
+    without the figure): every bracket registered within 0.5 px of its true warp at the
+    corners, or refused (merged only where no registered bracket sees the scene), never
+    merged misregistered. Before the misfits of a warp and of no motion were compared on
+    the same points: Desk's middle bracket of three refused ('fits the fine level only',
+    0.102 against 0.065: no motion kept the easier points), StillLife's five registered
+    up to 2.3, 5.6 and 9.1 px off (seeds 0-2). Measured now: 0.26 px; 0.13 and 0.34 px
+    with the longest refused."""
+    case = hand_held_walkers(scene, frames, ev, seed, figure=False)
+    result = merge_stack(case.stack(), MergeOptions(deghost="off"))
+    alignment = result.motion.alignment
+    refused = {j for j, _ in alignment.refused}
+    errors = [e for j, e in enumerate(_corner_errors(case, alignment)) if j not in refused]
+    assert max(errors) < 0.5, (errors, alignment.refused)
+    if scene == "Desk":
+        assert not refused, alignment.refused
+
+
 @pytest.mark.parametrize("make", [
     lambda: tripod_stack("jpeg"), lambda: tripod_stack("png"),
     lambda: tripod_stack("16-bit"), lambda: night_stack(0, "jpeg"),

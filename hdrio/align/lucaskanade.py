@@ -184,18 +184,37 @@ def residual(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
     ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest reference
     gradients where both are usable (``inf`` when too few are). ``index``: those points,
     when already found (:func:`strongest`)."""
+    return residuals(reference, ref_valid, moving, mov_valid, [warp], points, index)[0]
+
+
+def residuals(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
+              mov_valid: np.ndarray, warps, points: int = POINTS,
+              index: np.ndarray | None = None) -> list[float]:
+    """:func:`residual` of each of ``warps``, all over the same points: those where the
+    moving image is usable under every warp (a misfit over the points one warp keeps
+    and another loses compares two samples, not two warps: a still warp keeps the
+    points inside the moving image's usable regions, easy ones, and on a hand-held JPEG
+    ladder its coarse misfit came out 0.065 against 0.102 for the true warp)."""
     h, w = reference.shape
     if index is None:
         index = strongest(reference, ref_valid, points)
     py, px = np.divmod(index, w)
-    mx, my = _apply(warp, px.astype(np.float64), py.astype(np.float64))
-    values = np.empty(index.size)
+    px, py = px.astype(np.float64), py.astype(np.float64)
+    values = np.empty((len(warps), index.size))
+    common = np.ones(index.size, np.bool_)
     good = np.empty(index.size, np.bool_)
-    _sample(moving, mov_valid, mx, my, values, good)
-    if np.count_nonzero(good) < MIN_POINTS:
-        return np.inf
-    error = values[good] - reference.reshape(-1)[index][good]
-    return float(np.median(np.abs(error - np.median(error))))
+    for k, warp in enumerate(warps):
+        mx, my = _apply(warp, px, py)
+        _sample(moving, mov_valid, mx, my, values[k], good)
+        common &= good
+    if np.count_nonzero(common) < MIN_POINTS:
+        return [np.inf] * len(warps)
+    target = reference.reshape(-1)[index][common]
+    out = []
+    for k in range(len(warps)):
+        error = values[k][common] - target
+        out.append(float(np.median(np.abs(error - np.median(error)))))
+    return out
 
 
 def refine_LucasKanade(references: list[tuple[np.ndarray, np.ndarray]],
