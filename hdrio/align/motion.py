@@ -108,12 +108,12 @@ def falling(codes: np.ndarray, code_max: int) -> np.ndarray:
 def falling_fraction(stack: ExposureStack, response: CameraResponse) -> float:
     """The fraction of the pixels ``response`` was solved on (its ``sample_indices``)
     whose codes fall with exposure (:func:`falling`); 0 without such samples."""
-    from hdrio.response.sampling import sample_codes
+    from hdrio.io.staging import gather_pixels
 
     indices = response.parameters.get("sample_indices")
     if indices is None or len(indices) == 0:
         return 0.0
-    samples = sample_codes(stack.codes, np.asarray(indices)).transpose(1, 0, 2)
+    samples = gather_pixels(stack.codes, np.asarray(indices))  # (P, N, C)
     return float(np.mean(falling(samples, stack.code_max)))
 
 
