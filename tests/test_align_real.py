@@ -39,9 +39,9 @@ def test_walking_people_are_deghosted(shared_data):
     assert max(result.motion.alignment.motion) < 1.0
     assert 0.02 < result.motion.deghosting.fraction < 0.4
     # Each walker is kept as a well-exposed bracket saw it, never from the darkest one
-    # (2.4 stops under the reference, the walkers' clothes at codes 1-30): its noise made
-    # it agree with every other view, and both moving regions took it (grainy, blocky
-    # figures). Measured: both regions keep the longest bracket's view.
+    # (1/100 s, 2 stops under the reference's 1/25 s; the walkers' clothes at codes
+    # 1-30): its noise made it agree with every other view, and both moving regions took
+    # it (grainy, blocky figures). Measured: both keep the longest bracket's (1/6 s).
     sources = result.motion.deghosting.sources
     assert sources is not None and sources.max() > 0 and not np.any(sources == 0)
     header = exr_attributes(result)
