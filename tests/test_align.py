@@ -620,3 +620,26 @@ def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):
     banded = deghost(staged, tables, variance, 1, resampled=False)
     assert in_memory.fraction > 0  # the object is found
     np.testing.assert_array_equal(banded.keep, in_memory.keep)
+
+
+def test_codes_that_fall_with_exposure_are_found_and_grown_by_a_cell():
+    """A still pixel's code never falls as the exposure grows
+    (:func:`hdrio.align.motion.falling`): codes rising from bracket to bracket, or
+    falling by at most the margin (16 of 255, noise and JPEG's ringing), are not flagged;
+    a block that falls by more is, grown by a cell (:data:`hdrio.align.deghost.CELL`
+    pixels) each way, and the same at 16 bits (codes x 257)."""
+    from hdrio.align.deghost import CELL
+    from hdrio.align.motion import falling, falling_pixels
+
+    rng = np.random.default_rng(0)
+    codes = np.sort(rng.integers(0, 256, (3, 60, 80, 3)), axis=0).astype(np.uint8)
+    assert not falling_pixels(codes, 255).any()
+    near = codes.copy()
+    near[1] = np.maximum(near[0].astype(int) - 16, 0)  # falls by 16 at most: noise
+    assert not falling(near, 255).any()
+    codes[2, 20:30, 30:40, 1] = 0  # one channel of a block falls by up to 255
+    codes[1, 20:30, 30:40, 1] = 200
+    expected = np.zeros((60, 80), bool)
+    expected[20 - CELL:30 + CELL, 30 - CELL:40 + CELL] = True
+    assert np.array_equal(falling_pixels(codes, 255), expected)
+    assert np.array_equal(falling_pixels(codes.astype(np.uint16) * 257, 65535), expected)

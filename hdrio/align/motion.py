@@ -95,12 +95,15 @@ test found nothing, the response is solved again without them and the test run a
 def falling(codes: np.ndarray, code_max: int) -> np.ndarray:
     """``(...)`` bool of ``codes`` ``(P, ..., C)`` sorted by exposure: some channel falls
     by more than :data:`FALLING` of the range from a shorter bracket to a longer one."""
-    margin = FALLING * code_max
-    highest = codes[0].astype(np.float32)
+    wide = np.int32 if code_max > 255 else np.int16  # room for a code minus the margin
+    margin = wide(round(FALLING * code_max))
+    highest = codes[0].astype(wide)
     out = np.zeros(codes.shape[1:-1], bool)
     for j in range(1, codes.shape[0]):
-        current = codes[j].astype(np.float32)
-        out |= np.any(current < highest - margin, axis=-1)
+        current = codes[j].astype(wide)
+        below = current < highest - margin
+        for c in range(below.shape[-1]):  # by channel: faster than any(axis=-1)
+            out |= below[..., c]
         np.maximum(highest, current, out=highest)
     return out
 
@@ -117,13 +120,22 @@ def falling_fraction(stack: ExposureStack, response: CameraResponse) -> float:
     return float(np.mean(falling(samples, stack.code_max)))
 
 
+FALLING_BAND = 256
+"""Rows of every bracket :func:`falling_pixels` reads at a time (its float32 scratch for a
+24 MP stack's full height would be 0.6 GB)."""
+
+
 def falling_pixels(codes: np.ndarray, code_max: int) -> np.ndarray:
     """``(H, W)``: the pixels whose codes fall with exposure (:func:`falling`), grown by
-    a cell (a mover's edge blurs into its neighbours)."""
+    a cell (a mover's edge blurs into its neighbours); read :data:`FALLING_BAND` rows at
+    a time."""
     import scipy.ndimage
 
-    return scipy.ndimage.binary_dilation(falling(codes, code_max),
-                                         np.ones((2 * CELL + 1,) * 2, bool))
+    height = codes.shape[1]
+    out = np.zeros(codes.shape[1:3], np.uint8)
+    for top in range(0, height, FALLING_BAND):
+        out[top:top + FALLING_BAND] = falling(codes[:, top:top + FALLING_BAND], code_max)
+    return scipy.ndimage.maximum_filter(out, size=2 * CELL + 1, mode="constant") > 0
 
 
 def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
