@@ -177,24 +177,17 @@ def strongest(reference: np.ndarray, ref_valid: np.ndarray, points: int = POINTS
     return index
 
 
-def residual(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
-             mov_valid: np.ndarray, warp: np.ndarray, points: int = POINTS,
-             index: np.ndarray | None = None) -> float:
-    """The robust misfit of ``warp`` on one level: the median absolute deviation of
-    ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest reference
-    gradients where both are usable (``inf`` when too few are). ``index``: those points,
-    when already found (:func:`strongest`)."""
-    return residuals(reference, ref_valid, moving, mov_valid, [warp], points, index)[0]
-
-
 def residuals(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
               mov_valid: np.ndarray, warps, points: int = POINTS,
               index: np.ndarray | None = None) -> list[float]:
-    """:func:`residual` of each of ``warps``, all over the same points: those where the
-    moving image is usable under every warp (a misfit over the points one warp keeps
-    and another loses compares two samples, not two warps: a still warp keeps the
+    """The robust misfit of each of ``warps`` on one level: the median absolute deviation
+    of ``moving(W x) - reference(x)`` (``ln`` units) over the ``points`` strongest
+    reference gradients (``index``: those points, when already found,
+    :func:`strongest`), all over the same points: those where the moving image is usable
+    under every warp (``inf`` each when too few are). A misfit over the points one warp
+    keeps and another loses compares two samples, not two warps: no motion kept the
     points inside the moving image's usable regions, easy ones, and on a hand-held JPEG
-    ladder its coarse misfit came out 0.065 against 0.102 for the true warp)."""
+    ladder its coarse misfit came out 0.065 against 0.102 for the true warp."""
     h, w = reference.shape
     if index is None:
         index = strongest(reference, ref_valid, points)
