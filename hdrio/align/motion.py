@@ -29,6 +29,7 @@ from hdrio.align.registration import (
 from hdrio.align.resolve import sharp_edges
 from hdrio.align.warp import coverage, seen_elsewhere
 from hdrio.errors import HdrioError
+from hdrio.io.staging import gather_pixels
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.noise_fit import fit_noise
@@ -111,8 +112,6 @@ def falling(codes: np.ndarray, code_max: int) -> np.ndarray:
 def falling_fraction(stack: ExposureStack, response: CameraResponse) -> float:
     """The fraction of the pixels ``response`` was solved on (its ``sample_indices``)
     whose codes fall with exposure (:func:`falling`); 0 without such samples."""
-    from hdrio.io.staging import gather_pixels
-
     indices = response.parameters.get("sample_indices")
     if indices is None or len(indices) == 0:
         return 0.0
@@ -121,8 +120,8 @@ def falling_fraction(stack: ExposureStack, response: CameraResponse) -> float:
 
 
 FALLING_BAND = 256
-"""Rows of every bracket :func:`falling_pixels` reads at a time (its float32 scratch for a
-24 MP stack's full height would be 0.6 GB)."""
+"""Rows of every bracket :func:`falling_pixels` reads at a time (its scratch for a
+24 MP stack's full height, two int16 copies of a bracket and a mask, would be 0.36 GB)."""
 
 
 def falling_pixels(codes: np.ndarray, code_max: int) -> np.ndarray:
