@@ -46,9 +46,10 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     kept twice in 5 of these 12 cases, 'blends' in 6.
 
     The movers' region against the one bracket's scene it fits best, over the still
-    stack's error there: measured 1.20-2.44x for the bright objects (bound: the issue's
-    3x), 2.48-11.26x for the dark ones, kept from the one bracket that shows them, a few
-    codes above black (the issue's 3x not met there; bound here 15x); before: 4-47x."""
+    stack's error there: measured 1.19-2.56x for the bright objects (bound: the issue's
+    3x), 1.39-6.00x for the dark ones (the issue's 3x not met at crossings 5: 3.29x
+    small, 6.00x large, where the response is still bent; bound here 7x); before the
+    two rules of the next tests 2.48-11.26x, and before any deghosting 4-47x."""
     case = movers(crossing=crossing, bright=bright, large=large)
     still = movers(crossing=0, bright=bright, large=large)
     result = merge_stack(case.stack(), MergeOptions())
@@ -60,7 +61,54 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     still_scale = radiance_error(held.radiance, still.background, mask)["scale"]
     moving = mover_error(case, result.radiance, scale, mask)
     steady = mover_error(case, held.radiance, still_scale, mask)
-    assert moving <= (3 if bright else 15) * steady, (moving, steady)
+    assert moving <= (3 if bright else 7) * steady, (moving, steady)
+
+
+def test_a_dark_mover_where_the_reference_clips_is_found():
+    """A dark object that only the longest bracket shows, in front of a background that
+    the reference and the brackets between clip (and only the shortest sees): the longer
+    brackets were tested against the reference's clip alone, "at least this bright",
+    which a quarter of the background still passes. 34 % of the object was found, the
+    rest bent the re-solved response (ln f^-1 at code 240: 1.76 against the still
+    stack's 1.39) and the whole image's error went 8x the still stack's. Now the longer
+    brackets are tested against the shorter bracket that took over for the clipped
+    reference: all of it is found, the response is the still stack's within 0.01, and
+    the error outside the movers' region is within 1.5x (measured 1.08x)."""
+    case = movers(crossing=4, bright=False, large=True)
+    still = movers(crossing=0, bright=False, large=True)
+    result = merge_stack(case.stack(), MergeOptions())
+    held = merge_stack(still.stack(), MergeOptions())
+    shown = result.motion.deghosting.motion_mask(*result.radiance.shape[:2]) > 0
+    for footprint in case.objects:
+        if footprint is not None:
+            assert np.mean(shown[footprint]) > 0.95
+    mask = well_exposed(still.codes, still.camera.code_max)
+    outside = mask & ~np.any([f for f in case.objects if f is not None], axis=0)
+
+    def error(merged, scene):
+        scale = radiance_error(merged.radiance, scene, outside)["scale"]
+        return float(np.median(np.abs(scale * merged.radiance[outside] / scene[outside] - 1)))
+
+    assert error(result, case.background) <= 1.5 * error(held, still.background)
+
+
+def test_a_mover_only_the_reference_shows_is_left_out_where_most_agree():
+    """A dark object 0.6 % of the frame in two of five brackets, one of them the
+    deghosting's reference. The region kept the reference's view, the object a few codes
+    above black, whenever half the others agreed with it, though more agreed with
+    another bracket's (the background): 4.49x the still stack's error. A region now keeps
+    the reference's view only when no other view has more agreement; measured 1.39x
+    (bound 2x)."""
+    case = movers(crossing=2, bright=False, large=False)
+    still = movers(crossing=0, bright=False, large=False)
+    result = merge_stack(case.stack(), MergeOptions())
+    held = merge_stack(still.stack(), MergeOptions())
+    mask = well_exposed(still.codes, still.camera.code_max)
+    scale = radiance_error(result.radiance, case.background, mask)["scale"]
+    still_scale = radiance_error(held.radiance, still.background, mask)["scale"]
+    assert movers_kept(case, result.radiance, scale) == ["background", "background"]
+    moving = mover_error(case, result.radiance, scale, mask)
+    assert moving <= 2 * mover_error(case, held.radiance, still_scale, mask)
 
 
 @pytest.mark.parametrize("ev,seed", [(1.0, 0), (1.5, 2), (2.0, 0)])
