@@ -47,9 +47,10 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
 
     The movers' region against the one bracket's scene it fits best, over the still
     stack's error there: measured 1.19-2.56x for the bright objects (bound: the issue's
-    3x), 1.39-6.00x for the dark ones (the issue's 3x not met at crossings 5: 3.29x
-    small, 6.00x large, where the response is still bent; bound here 7x); before the
-    two rules of the next tests 2.48-11.26x, and before any deghosting 4-47x."""
+    3x), 1.10-3.29x for the dark ones (the issue's 3x not met for the small one crossing
+    five brackets: the longest bracket's view of it is next to clipped channels
+    everywhere, which says nothing, and it bends the response; bound here 4x); before
+    the rules of the next two tests 2.48-11.26x, and before any deghosting 4-47x."""
     case = movers(crossing=crossing, bright=bright, large=large)
     still = movers(crossing=0, bright=bright, large=large)
     result = merge_stack(case.stack(), MergeOptions())
@@ -61,20 +62,24 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     still_scale = radiance_error(held.radiance, still.background, mask)["scale"]
     moving = mover_error(case, result.radiance, scale, mask)
     steady = mover_error(case, held.radiance, still_scale, mask)
-    assert moving <= (3 if bright else 7) * steady, (moving, steady)
+    assert moving <= (3 if bright else 4) * steady, (moving, steady)
 
 
-def test_a_dark_mover_where_the_reference_clips_is_found():
+@pytest.mark.parametrize("crossing", [4, 5])
+def test_a_dark_mover_where_the_reference_clips_is_found(crossing):
     """A dark object that only the longest bracket shows, in front of a background that
     the reference and the brackets between clip (and only the shortest sees): the longer
     brackets were tested against the reference's clip alone, "at least this bright",
-    which a quarter of the background still passes. 34 % of the object was found, the
-    rest bent the re-solved response (ln f^-1 at code 240: 1.76 against the still
-    stack's 1.39) and the whole image's error went 8x the still stack's. Now the longer
-    brackets are tested against the shorter bracket that took over for the clipped
-    reference: all of it is found, the response is the still stack's within 0.01, and
-    the error outside the movers' region is within 1.5x (measured 1.08x)."""
-    case = movers(crossing=4, bright=False, large=True)
+    which a quarter of the background still passes. At 4 crossings 34 % of it was
+    found, the rest bent the re-solved response (ln f^-1 at code 240: 1.76 against the
+    still stack's 1.39) and the whole image's error went 8x the still stack's. Now the
+    longer brackets are tested against the shorter bracket that took over for the
+    clipped reference: all of it is found, and the error outside the movers' region is
+    1.08x the still stack's. At 5 crossings the first test, on the bent curve, found 40 %
+    of the image moving, the test on the curve solved without that 56 %: solved only
+    once, the curve was still 0.13 off at code 240 and the error 4.6x; solved again
+    without the 56 %, 1.05x. Bound 1.5x."""
+    case = movers(crossing=crossing, bright=False, large=True)
     still = movers(crossing=0, bright=False, large=True)
     result = merge_stack(case.stack(), MergeOptions())
     held = merge_stack(still.stack(), MergeOptions())
@@ -121,9 +126,11 @@ def test_a_figure_in_every_bracket_is_kept_from_one(ev, seed):
     error against the best-fitting bracket's scene. The response's samples whose codes
     fall with exposure now send it to be solved again without them
     (:data:`hdrio.align.motion.FALLING`). Measured over 1, 1.5 and 2 EV, seeds 0-2:
-    every one deghosted, 1.4-4.6x (the figure from one bracket alone, its noise); bound
-    6x, under the 8.3x of a blend. (How fragile the first pass was: with each place a
-    third of the figure's width on, not 0.35, all nine were found before too.)"""
+    every one deghosted, 1.25-2.13x (the figure from one bracket alone, its noise;
+    1.4-4.6x while the response was solved again only once,
+    :data:`hdrio.align.motion.RESOLVES`); bound 3x, under the 8.3x of a blend. (How
+    fragile the first pass was: with each place a third of the figure's width on, not
+    0.35, all nine were found before too.)"""
     case, still = walkers(ev, seed), walkers(ev, seed, moving=False)
     result = merge_stack(case.stack(), MergeOptions())
     held = merge_stack(still.stack(), MergeOptions())
@@ -136,7 +143,7 @@ def test_a_figure_in_every_bracket_is_kept_from_one(ev, seed):
         return float(np.median(np.abs(scale * radiance[region] / scene[region] - 1)))
 
     kept = min(error(result.radiance, scene) for scene in case.scenes)
-    assert kept <= 6 * error(held.radiance, still.scenes[0]), kept
+    assert kept <= 3 * error(held.radiance, still.scenes[0]), kept
 
 
 def _corner_errors(case, alignment) -> list[float]:
