@@ -46,11 +46,12 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     kept twice in 5 of these 12 cases, 'blends' in 6.
 
     The movers' region against the one bracket's scene it fits best, over the still
-    stack's error there: measured 1.19-2.56x for the bright objects (bound: the issue's
-    3x), 1.10-3.29x for the dark ones (the issue's 3x not met for the small one crossing
-    five brackets: the longest bracket's view of it is next to clipped channels
-    everywhere, which says nothing, and it bends the response; bound here 4x); before
-    the rules of the next two tests 2.48-11.26x, and before any deghosting 4-47x."""
+    stack's error there, bound the issue's 3x: measured 1.19-1.58x for the bright
+    objects, 1.10-1.62x for the dark ones. Before the rules of the next two tests and
+    the falling codes left out of the re-solve (:func:`hdrio.align.motion.deghost_step`:
+    the small dark object crossing five brackets is next to a clipped channel everywhere
+    in the longest bracket, never found, and bent the curve: 3.29x) 1.20-2.44x and
+    2.48-11.26x; before any deghosting 4-47x."""
     case = movers(crossing=crossing, bright=bright, large=large)
     still = movers(crossing=0, bright=bright, large=large)
     result = merge_stack(case.stack(), MergeOptions())
@@ -62,7 +63,7 @@ def test_no_mover_is_kept_from_two_brackets(bright, large, crossing):
     still_scale = radiance_error(held.radiance, still.background, mask)["scale"]
     moving = mover_error(case, result.radiance, scale, mask)
     steady = mover_error(case, held.radiance, still_scale, mask)
-    assert moving <= (3 if bright else 4) * steady, (moving, steady)
+    assert moving <= 3 * steady, (moving, steady)
 
 
 @pytest.mark.parametrize("crossing", [4, 5])
