@@ -259,6 +259,11 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
     majority = [] if clipped or support < 0.5 else [
         (candidates.noise(reference, box, region), reference, flagged)]
     for k in others:
+        if support >= 0.5 and not np.any(flagged[k] & core):
+            # It agrees with the reference wherever it was judged: the same view. (Not
+            # tested: the test against each bracket and its clipped cells were 0.3 s of
+            # a 6 MP stack's 0.5 s of deghosting.)
+            continue
         if (clipped and np.count_nonzero(flagged[k] & core) > 0.5 * np.count_nonzero(core)
                 or candidates.clipped_fraction(k, box, region) > CLIPPED_SOURCE):
             continue
