@@ -243,8 +243,7 @@ def _source(candidates: _Candidates, reference: int, box: tuple[slice, slice],
         against = (mean > limits[:, None, None]) & (far > FAR) & told
         against[k] = False
         agree = _agreement(against, told, core, k)
-        # Whether k is saturated there is asked only of a view that would count (its
-        # clipped cells over the whole image were half of _source's time).
+        # Whether k is saturated there is asked only of a view that would count.
         if (agree <= best[0] and agree < 0.5
                 or candidates.clipped_fraction(k, box, region) > CLIPPED_SOURCE):
             continue

@@ -131,7 +131,8 @@ FALLING_LEFT = 0.005
 (:data:`FALLING`), the falling pixels are left out of the re-solve too
 (:func:`deghost_step`; the generated movers that needed it: 0.60-1.08 %; the real
 stacks' canal, ghost/ and memorial with ``--exclude-color``: 0 %). Reading every
-pixel's codes costs 1.3 s at 7 x 24 MP, so it is not done where none fall."""
+pixel's codes (:func:`falling_pixels`) costs 1.6 s at 7 x 24 MP, so it is not done
+where none fall."""
 RESOLVES = 2
 """The most times :func:`deghost_step` solves the response again without what it
 found moving."""
@@ -275,6 +276,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         # the pixels whose codes fall with exposure, and tested again.
         falls = falling_pixels(stack.codes, stack.code_max)
         exclude = falls.copy()
+    last = first  # the test before each re-solve
     for attempt in range(RESOLVES):
         if exclude is None:
             break
@@ -310,10 +312,10 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         # (five dark objects, one a bracket: 40 % dropped first, 56 % then, the curve
         # still bent by 0.13 stop at code 240).
         dropped = found.keep.min(axis=0) < 1
-        if found.fraction <= GROWN * first.fraction or not np.any(dropped & ~before):
+        if found.fraction <= GROWN * last.fraction or not np.any(dropped & ~before):
             break
         exclude = _pixels(dropped | before, height, width) | falls
-        first = found
+        last = found
     keep = motion.deghosting.keep
     motion.keep = keep if cells is not None or keep.min() < 1.0 else None  # nothing dropped
     return response
