@@ -263,7 +263,6 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         # curve by 0.07 at code 240 and the whole image's error was 2.9x the still
         # stack's; left out, 0.99x).
         exclude = _pixels(first.keep.min(axis=0) < 1, height, width)
-        falls = np.zeros_like(exclude)
         if falling_fraction(stack, response, exclude) >= FALLING_LEFT:
             falls = falling_pixels(stack.codes, stack.code_max)
             exclude |= falls
@@ -314,7 +313,9 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         dropped = found.keep.min(axis=0) < 1
         if found.fraction <= GROWN * last.fraction or not np.any(dropped & ~before):
             break
-        exclude = _pixels(dropped | before, height, width) | falls
+        exclude = _pixels(dropped | before, height, width)
+        if falls is not None:
+            exclude |= falls
         last = found
     keep = motion.deghosting.keep
     motion.keep = keep if cells is not None or keep.min() < 1.0 else None  # nothing dropped
