@@ -144,7 +144,7 @@ def merge_report(image: Image):
 
     if image.pixels.shape[-1] != 3:
         return None
-    return StreamingCheck.for_attributes(image.attributes)
+    return StreamingCheck.for_attributes(image.attributes, compiled=True)
 
 
 # ------------------------------------------------------------------------ information

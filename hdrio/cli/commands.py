@@ -134,11 +134,13 @@ def written_lines(summary_text: str) -> str:
 
 
 def merge_check(options) -> StreamingCheck:
-    """The check to feed with a merge's EXR bands as they are written."""
+    """The check to feed with a merge's EXR bands as they are written (counted by numba's
+    kernel, on the threads that convert them)."""
     from hdrio.cms.spaces import chromaticities
 
     return StreamingCheck(chromaticities(options.output_space, options.ocio_config),
-                          units="cd/m^2" if options.calibration is not None else "relative")
+                          units="cd/m^2" if options.calibration is not None else "relative",
+                          compiled=True)
 
 
 def merge_report(check: StreamingCheck, result: MergeResult, output: Path) -> CheckReport:

@@ -74,57 +74,44 @@ def _scaled_half(value, scale, low, high):
 
 
 @njit(cache=True, nogil=True)
-def _to_half_values(source, scale, low, high, out, stored):
+def _to_half_values(source, scale, low, high, out):
     """:func:`_to_half_rows` of flat values sharing one channel's numbers (a loop the
     compiler vectorises: 1.2 ns a value on one core, against 8 for NumPy's ``astype``)."""
-    keep = stored.size == source.size
     for i in range(source.size):
-        bits = _scaled_half(source[i], scale, low, high)
-        out[i] = bits
-        if keep:
-            stored[i] = half_value(bits)
+        out[i] = _scaled_half(source[i], scale, low, high)
 
 
 @njit(cache=True, nogil=True)
-def _to_half_rows(source, scales, lows, highs, out, stored):
+def _to_half_rows(source, scales, lows, highs, out):
     """``out[y, x, c]`` the half bits of ``source[y, x, c] * scales[c]`` clipped to
-    ``[lows[c], highs[c]]``; ``stored``, when of ``source``'s size, the float32 value of
-    each half."""
-    keep = stored.size == source.size
+    ``[lows[c], highs[c]]``."""
     for y in range(source.shape[0]):
         for x in range(source.shape[1]):
             for c in range(source.shape[2]):
-                bits = _scaled_half(source[y, x, c], scales[c], lows[c], highs[c])
-                out[y, x, c] = bits
-                if keep:
-                    stored[y, x, c] = half_value(bits)
+                out[y, x, c] = _scaled_half(source[y, x, c], scales[c], lows[c], highs[c])
 
 
 def to_half(source: np.ndarray, scales: np.ndarray, lows: np.ndarray, highs: np.ndarray,
             observe=None) -> np.ndarray:
     """``(rows, W, C)`` float32 pixels as half (``float16``), each channel ``c`` scaled by
     ``scales[c]`` and clipped to ``[lows[c], highs[c]]`` in float32 first, on every core.
-    ``observe(rows)``, when given, sees each piece of the result on the thread that made
-    it, as float32 values equal to the halves (the kernel writes both: NumPy's own
-    conversion of half to float32 was most of the streaming check's cost); it must be
-    safe to call from several threads at once."""
+    ``observe(rows)``, when given, sees each piece of the result (``float16``) on the
+    thread that made it, while it is in the cache; it must be safe to call from several
+    threads at once."""
     source = np.ascontiguousarray(source, dtype=np.float32)
     out = np.empty(source.shape, dtype=np.uint16)
     factors, low, high = (np.asarray(v, dtype=np.float32) for v in (scales, lows, highs))
     shared = bool(np.all(factors == factors[0]) and np.all(low == low[0])
                   and np.all(high == high[0]))
-    unkept = np.empty((0, 0, 0), np.float32)
 
     def piece(top: int, bottom: int) -> None:
-        stored = unkept if observe is None else np.empty(
-            (bottom - top, *source.shape[1:]), np.float32)
         if shared:  # every channel alike (RGB without layers): one flat loop
             _to_half_values(source[top:bottom].reshape(-1), factors[0], low[0], high[0],
-                            out[top:bottom].reshape(-1), stored.reshape(-1))
+                            out[top:bottom].reshape(-1))
         else:
-            _to_half_rows(source[top:bottom], factors, low, high, out[top:bottom], stored)
+            _to_half_rows(source[top:bottom], factors, low, high, out[top:bottom])
         if observe is not None:
-            observe(stored)
+            observe(out[top:bottom].view(np.float16))
 
     on_threads(piece, source.shape[0])
     return out.view(np.float16)

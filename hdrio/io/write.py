@@ -248,8 +248,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
     range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
     :func:`hdrio.job.output.half_safe_scale`). ``observe(rows)``, when given, sees the
-    image's own channels exactly as stored, piece by piece (a half image's as float32
-    values equal to its halves, possibly from several threads at once).
+    image's own channels exactly as stored, piece by piece (a half image's as
+    ``float16``), possibly from several threads at once.
 
     ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
     channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the

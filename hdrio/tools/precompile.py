@@ -16,7 +16,9 @@ from hdrio.parallel import die_with_parent
 
 def _compile_merge() -> None:
     """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), the noise
-    fit's look for clipped neighbours, and the write's conversion of RGB to half."""
+    fit's look for clipped neighbours, and the write's conversion of RGB to half and the
+    check that counts its pieces."""
+    from hdrio.cms.checks import StreamingCheck
     from hdrio.io.half import to_half
     from hdrio.merge.weighted_mean import merge_brackets
     from hdrio.radiometry.noise_fit import near_clipping
@@ -27,7 +29,8 @@ def _compile_merge() -> None:
     stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
     near_clipping(codes, 2, 250)
-    to_half(np.ones((2, 2, 3), np.float32), [1.0] * 3, [0.0] * 3, [1.0] * 3)
+    to_half(np.ones((2, 2, 3), np.float32), [1.0] * 3, [0.0] * 3, [1.0] * 3,
+            StreamingCheck().add)
 
 
 def _compile_motion() -> None:
