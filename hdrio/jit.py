@@ -45,9 +45,8 @@ def warm_up(*modules: str) -> None:
 
     The first kernel a process calls, even one loaded from the disk cache, first imports
     and registers numba's lowering of NumPy (measured here: the first cached kernel
-    0.98-1.03 s, the next 0.01 s), deghosting's first use of ``scipy.ndimage``
-    imports it (0.6 s, most of it SciPy parsing docstrings), and the response's solve
-    imports ``scipy.linalg`` (0.39 s on the 16-core device). A merge starts this when it
+    0.98-1.03 s, the next 0.01 s), and deghosting's first use of ``scipy.ndimage``
+    imports it (0.6 s, most of it SciPy parsing docstrings). A merge starts this when it
     begins reading the brackets, while its main thread waits on the decoders (which
     release the GIL), so that on a machine with cores to spare both are done before the
     stages need them. numba's part runs under its compiler lock (a kernel called

@@ -72,7 +72,7 @@ def test_fast_solve_matches_dense_lstsq(n_samples, n_brackets, levels, smoothing
 def test_unblocked_cholesky_is_available():
     # Otherwise every factorisation goes to the threaded dpotrf (correct, but slow on a
     # busy machine): the fallback should be a conscious choice, not a silent one.
-    assert cholesky._potf2() is not None, "scipy.linalg.cython_lapack's dpotf2 not found"
+    assert cholesky._potf2 is not None, "scipy.linalg.cython_lapack's dpotf2 not found"
 
 
 @pytest.mark.parametrize("n", [3, 256, cholesky.UNBLOCKED_MAX + 44])

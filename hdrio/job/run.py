@@ -149,9 +149,8 @@ def _read_and_merge(paths: Sequence[str | Path], plan: MergePlan, *,
         response = read_response(options.response_from)
     clock = PhaseClock()
     say(f"reading {len(paths)} bracket{'' if len(paths) == 1 else 's'}")
-    # numba's first use, the solve's and deghosting's SciPy, prepared while they decode
-    jit.warm_up(*(("scipy.linalg",) if response is None else ()),
-                *(("scipy.ndimage",) if plan.aligns or plan.deghosts else ()))
+    # numba's first use (and deghosting's SciPy), prepared while the brackets decode
+    jit.warm_up(*(("scipy.ndimage",) if plan.aligns or plan.deghosts else ()))
     stack = read_brackets(paths, exposures=exposures, exposures_from=exposures_from,
                           progress=read_progress, white_balance=options.raw_multipliers,
                           skip_brackets="brackets" in skips,

@@ -16,9 +16,9 @@ signature is not the expected one, every size goes to ``cho_factor``.
 from __future__ import annotations
 
 import ctypes
-import functools
 
 import numpy as np
+import scipy.linalg
 
 UNBLOCKED_MAX = 256
 """Largest matrix factored by ``dpotf2`` on the calling thread."""
@@ -46,12 +46,8 @@ def _cython_lapack(name: str, signature: bytes, prototype: type) -> object | Non
     return prototype(get_pointer(capsule, capsule_name))
 
 
-@functools.cache
-def _potf2() -> object | None:
-    """LAPACK's ``dpotf2``, found on first use (SciPy's linear algebra is imported then,
-    not with hdrio's modules: hdrio.jit.warm_up imports it while the brackets decode)."""
-    return _cython_lapack("dpotf2", _POTF2_SIGNATURE, ctypes.CFUNCTYPE(
-        None, ctypes.c_char_p, _INT_P, _DOUBLE_P, _INT_P, _INT_P))
+_potf2 = _cython_lapack("dpotf2", _POTF2_SIGNATURE, ctypes.CFUNCTYPE(
+    None, ctypes.c_char_p, _INT_P, _DOUBLE_P, _INT_P, _INT_P))
 
 
 def cholesky_factor(matrix: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -61,15 +57,12 @@ def cholesky_factor(matrix: np.ndarray) -> tuple[np.ndarray, bool]:
     Raises :class:`numpy.linalg.LinAlgError` if ``matrix`` is not positive definite.
     """
     n = matrix.shape[0]
-    potf2 = _potf2()
-    if potf2 is None or n > UNBLOCKED_MAX or not matrix.flags.c_contiguous:
-        import scipy.linalg
-
+    if _potf2 is None or n > UNBLOCKED_MAX or not matrix.flags.c_contiguous:
         return scipy.linalg.cho_factor(matrix, lower=True, overwrite_a=True, check_finite=False)
     # Symmetric, so the C-ordered array is also the matrix in Fortran order; dpotf2 writes
     # L in its Fortran lower triangle, which the Fortran-ordered view matrix.T presents.
     size, info = ctypes.c_int(n), ctypes.c_int(0)
-    potf2(b"L", ctypes.byref(size), matrix.ctypes.data_as(_DOUBLE_P), ctypes.byref(size),
+    _potf2(b"L", ctypes.byref(size), matrix.ctypes.data_as(_DOUBLE_P), ctypes.byref(size),
            ctypes.byref(info))
     if info.value != 0:
         raise np.linalg.LinAlgError(f"the matrix is not positive definite (minor {info.value})")

@@ -29,6 +29,7 @@ complement by sparse products took 6.6 and 44 ms (same machine, same load).
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 
 from hdrio.response.cholesky import cholesky_factor
 
@@ -144,8 +145,6 @@ class ReducedNormalSolver:
         schur = reduced_normal_matrix(rows.Z, rows.squares, self.l_inverse, diagonal, first,
                                       second)
         reduced = schur if self.g_active.all() else schur[np.ix_(self.g_active, self.g_active)]
-        import scipy.linalg  # on first use (hdrio.jit.warm_up imports it while reading)
-
         # The 1-norm before the factorisation overwrites the matrix (symmetric, so its
         # transpose is the Fortran-ordered array LAPACK takes without a copy).
         norm1 = scipy.linalg.lapack.dlange("1", reduced.T)
@@ -165,8 +164,6 @@ class ReducedNormalSolver:
         y = self.l_inverse * r_l
         rhs = r_g + np.bincount(rows.flat_Z, weights=(rows.squares * y[:, None]).reshape(-1),
                                 minlength=rows.n)
-        import scipy.linalg
-
         g = np.zeros(rows.n)
         g[self.g_active] = scipy.linalg.cho_solve(self.factor, rhs[self.g_active],
                                                   check_finite=False)
