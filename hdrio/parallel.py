@@ -32,19 +32,37 @@ def threads() -> int:
     return max(1, os.cpu_count() or 1)
 
 
+BLAS_POOLS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+"""The BLAS libraries' thread pools, which hdrio's processes keep to one thread: hdrio's
+kernels are its own (numba, on :func:`threads`), and its BLAS work is 3 x 3 colour
+matrices, small normal equations and matrix-vector products whose threads would split
+rows alone. A pool of one thread per CPU spins after it starts and after each call it
+shares out: on the 16-core device a warm merge of 7 x 24 MP had spent 4.7-4.8 CPU
+seconds when it began reading, against 1.27 on one CPU and 1.76 on four (docs/speed.md,
+"Many cores"). NumPy's and SciPy's OpenBLAS each start such a pool when they load."""
+
+
+def blas_on_one_thread(environment: dict[str, str] | None = None) -> None:
+    """Keep the BLAS pools (:data:`BLAS_POOLS`) of ``environment`` (this process's by
+    default; read when NumPy and SciPy load, so before they are imported) to one thread,
+    where the user has not sized them."""
+    environment = os.environ if environment is None else environment
+    for name in BLAS_POOLS:
+        environment.setdefault(name, "1")
+
+
 def worker_environment(count: int) -> dict[str, str]:
     """The environment of a worker process given ``count`` of the machine's CPUs (a farm
     worker, a process of ``--group``'s pool, a Dask worker): hdrio's own kernels
     (``HDRIO_THREADS``), numba's parallel kernels and any OpenMP or BLAS pool a library
     starts are all sized to it, so that workers sharing a machine never run more threads
-    than it has cores. OpenImageIO's and OpenEXR's pools follow ``HDRIO_THREADS``
-    (:func:`hdrio.io.native.size_thread_pools`). glibc's heap arenas are held to
-    :data:`HEAP_ARENAS` (:func:`limit_heap_arenas`)."""
+    than it has cores; BLAS on one thread (:data:`BLAS_POOLS`). OpenImageIO's and
+    OpenEXR's pools follow ``HDRIO_THREADS`` (:func:`hdrio.io.native.size_thread_pools`).
+    glibc's heap arenas are held to :data:`HEAP_ARENAS` (:func:`limit_heap_arenas`)."""
     value = str(max(1, int(count)))
     return {**{name: value for name in ("HDRIO_THREADS", "NUMBA_NUM_THREADS",
-                                        "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                        "MKL_NUM_THREADS")},
-            "MALLOC_ARENA_MAX": str(HEAP_ARENAS)}
+                                        "OMP_NUM_THREADS")},
+            **{name: "1" for name in BLAS_POOLS}, "MALLOC_ARENA_MAX": str(HEAP_ARENAS)}
 
 
 def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:

@@ -15,7 +15,7 @@ import pytest
 from hdrio.io.brackets import read_brackets
 from hdrio.io.staging import is_staged
 from hdrio.io.write import rows_per_write, write_exr
-from hdrio.parallel import threads, worker_environment
+from hdrio.parallel import BLAS_POOLS, threads, worker_environment
 
 SEVEN = (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0, 4.0, 16.0)
 
@@ -123,7 +123,25 @@ def test_a_worker_environment_sizes_every_pool():
     environment = worker_environment(3)
     assert environment["HDRIO_THREADS"] == environment["NUMBA_NUM_THREADS"] == "3"
     assert environment["OMP_NUM_THREADS"] == "3"
+    assert environment["OPENBLAS_NUM_THREADS"] == environment["MKL_NUM_THREADS"] == "1"
     assert worker_environment(0)["HDRIO_THREADS"] == "1"
+
+
+@pytest.mark.parametrize("exported", [None, "4"])
+def test_the_command_keeps_blas_to_one_thread_unless_the_user_sized_it(monkeypatch,
+                                                                      exported):
+    import hdrio.__main__ as entry
+    import hdrio.cli
+
+    for name in BLAS_POOLS:
+        monkeypatch.delenv(name, raising=False)
+        if exported is not None:
+            monkeypatch.setenv(name, exported)
+    seen = {}
+    monkeypatch.setattr(hdrio.cli, "run", lambda: seen.update(
+        {name: os.environ.get(name) for name in BLAS_POOLS}))
+    entry.run()
+    assert seen == {name: exported or "1" for name in BLAS_POOLS}
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
