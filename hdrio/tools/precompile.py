@@ -30,7 +30,7 @@ def _compile_merge() -> None:
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
     near_clipping(codes, 2, 250)
     to_half(np.ones((2, 2, 3), np.float32), [1.0] * 3, [0.0] * 3, [1.0] * 3,
-            StreamingCheck().add)
+            StreamingCheck(compiled=True).add)
 
 
 def _compile_motion() -> None:
