@@ -16,6 +16,7 @@ from numba.extending import overload
 
 from hdrio.float_bits import float_bits
 from hdrio.io.half import half_value
+from hdrio.jit import INNER
 
 
 def _as_float32(value):
@@ -32,7 +33,7 @@ def _as_float32_typed(value):
     return None
 
 
-@njit(inline="always")
+@njit(**INNER)
 def _luminance(r, g, b, weights):
     y = r * weights[0]
     y = y + g * weights[1]
