@@ -12,6 +12,13 @@ threads to N as under ``taskset``):
 * the merge's peak at 5, 7 and 9 brackets (every CPU);
 * one merge at each N of ``--scaling`` with its progress log: where the wall time goes,
   stage by stage, as cores are added;
+* with ``--baseline TREE``, the same 7-bracket merge by the ``hdrio`` of ``TREE`` (a
+  folder holding another commit's ``hdrio/`` package: ``git archive COMMIT hdrio | tar
+  -x -C TREE``), alternated with the two above, so that a change is measured against
+  its parent in one run on one machine (``python -m hdrio`` with ``TREE`` first on
+  ``PYTHONPATH``, started in the benchmark's temporary folder: ``python -m`` puts the
+  working directory first on ``sys.path``, and from the checkout it would run the
+  checkout's);
 * the first run with an empty kernel cache against a warm one (``hdrio demo``);
 * a shoot (:mod:`benchmarks.farm`): ``--sets`` sets of 7 x 12 MP, ``--group`` with
   ``--threads`` of each count of ``--workers`` and a Dask ``LocalCluster`` of ``--dask``.
@@ -30,6 +37,7 @@ import json
 import os
 import re
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -71,26 +79,40 @@ def stages(log: str, seconds: float) -> dict[str, float]:
     return result
 
 
+_METHODS = {"floor": "I/O floor (decode the 7 JPEGs, write the pixels as half EXR)",
+            "merge": "hdrio merge 7 JPEGs -> half EXR",
+            "baseline": "the baseline's hdrio merge 7 JPEGs -> half EXR"}
+
+
 def merge_rows(paths: list[str], exposures: list[str], folder: Path, cores: list[int],
-               repeats: int, env: dict[str, str]) -> list[dict]:
-    """The 7-bracket merge and its floor at each count of ``cores``, alternated."""
-    hdrio = hdrio_command()
+               repeats: int, env: dict[str, str], baseline: Path | None = None
+               ) -> list[dict]:
+    """The 7-bracket merge and its floor at each count of ``cores`` (and the
+    ``baseline`` tree's merge), alternated."""
     seven = slice(1, 8)
-    merge = [*hdrio, "merge", *paths[seven], "--exposures", ",".join(exposures[seven]),
-             "-o", str(folder / "merge7.exr"), "-q"]
-    floor = floor_command(paths[seven], folder / "written.npy", folder / "floor.exr")
+    arguments = ["merge", *paths[seven], "--exposures", ",".join(exposures[seven]),
+                 "-o", str(folder / "merge7.exr"), "-q"]
+    commands = {"floor": (floor_command(paths[seven], folder / "written.npy",
+                                        folder / "floor.exr"), env),
+                "merge": ([*hdrio_command(), *arguments], env)}
+    if baseline is not None:
+        path = os.pathsep.join([str(baseline.resolve()), os.environ.get("PYTHONPATH", "")])
+        commands["baseline"] = ([sys.executable, "-m", "hdrio", *arguments],
+                                {**env, "PYTHONPATH": path.rstrip(os.pathsep)})
+        found = subprocess.run([sys.executable, "-c", "import hdrio; print(hdrio.__file__)"],
+                               capture_output=True, text=True, cwd=folder, check=True,
+                               env={**os.environ, **commands["baseline"][1]}).stdout.strip()
+        if not Path(found).resolve().is_relative_to(baseline.resolve()):
+            raise SystemExit(f"--baseline {baseline}: python -m hdrio runs {found}")
     rows = []
     for count in cores:
-        runs = {"floor": [], "merge": []}
+        runs: dict[str, list[dict]] = {name: [] for name in commands}
         for _ in range(repeats):
-            runs["floor"].append(timed(floor, env, count))
-            runs["merge"].append(timed(merge, env, count))
+            for name, (argv, environment) in commands.items():
+                runs[name].append(timed(argv, environment, count, cwd=folder))
         for name, found in runs.items():
             rows.append({"section": "merge 7 x 24 MP", "cores": count,
-                         "method": ("I/O floor (decode the 7 JPEGs, write the pixels as "
-                                    "half EXR)" if name == "floor" else
-                                    "hdrio merge 7 JPEGs -> half EXR"),
-                         "what": name,
+                         "method": _METHODS[name], "what": name,
                          "seconds": statistics.median(r["seconds"] for r in found),
                          "cpu_seconds": statistics.median(r["cpu_seconds"] for r in found),
                          "peak_mb": max(r["peak_mb"] for r in found),
@@ -136,11 +158,15 @@ def ratios(rows: list[dict]) -> dict[str, float]:
     result = {}
     pick = {(row["section"], row.get("what"), row["cores"]): row for row in rows}
     for count in sorted({row["cores"] for row in rows if row["section"] == "merge 7 x 24 MP"}):
-        merge = pick[("merge 7 x 24 MP", "merge", count)]
         floor = pick[("merge 7 x 24 MP", "floor", count)]
-        result[f"{count} cores: merge / floor (wall)"] = merge["seconds"] / floor["seconds"]
-        result[f"{count} cores: merge / floor (CPU seconds)"] = (
-            merge["cpu_seconds"] / floor["cpu_seconds"])
+        for name in ("merge", "baseline"):
+            merge = pick.get(("merge 7 x 24 MP", name, count))
+            if merge is None:
+                continue
+            result[f"{count} cores: {name} / floor (wall)"] = (merge["seconds"]
+                                                               / floor["seconds"])
+            result[f"{count} cores: {name} / floor (CPU seconds)"] = (
+                merge["cpu_seconds"] / floor["cpu_seconds"])
     peaks = [row["peak_mb"] for row in rows if row["section"] == "peak"] + [
         row["peak_mb"] for row in rows
         if row.get("what") == "merge" and row["cores"] == all_cores()]
@@ -184,6 +210,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shoot-size", default="3000x4000")
     parser.add_argument("--workers", default="1,4,all")
     parser.add_argument("--dask", default="all")
+    parser.add_argument("--baseline", type=Path, default=None, metavar="TREE",
+                        help="a folder holding another commit's hdrio/ package, whose "
+                             "merge runs alternated with this one's")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.size.split("x"))
@@ -205,7 +234,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"first merge (fills the kernel cache): {first['seconds']:.2f} s", flush=True)
         np.save(folder / "written.npy",
                 read_image(folder / "merge7.exr")[0].astype(np.float16))
-        rows += merge_rows(paths, exposures, folder, counts(args.cores), args.repeats, env)
+        if args.baseline is not None:  # its kernels compiled before the timed runs
+            baseline = merge_rows(paths, exposures, folder, [all_cores()], 1, env,
+                                  args.baseline)
+            print(f"baseline: {args.baseline}, its merge once: "
+                  f"{baseline[-1]['seconds']:.2f} s", flush=True)
+        rows += merge_rows(paths, exposures, folder, counts(args.cores), args.repeats, env,
+                           args.baseline)
         rows += peak_rows(paths, exposures, folder, env)
         if args.scaling:
             rows += scaling_rows(paths, exposures, folder, counts(args.scaling), env)

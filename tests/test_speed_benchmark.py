@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -77,14 +78,21 @@ def test_the_many_core_run_measures_the_merge_its_floor_and_a_shoot(tmp_path):
     # process with its CPU seconds and peak from the OS, the ratios from rows of one run.
     from benchmarks.cores import main as cores
 
+    # --baseline: another tree's hdrio, alternated (here the checkout's own tree, whose
+    # kernels are cached; a tree without hdrio/ is refused, not silently replaced)
+    root = Path(__file__).resolve().parents[1]
     assert cores(["--size", "64x96", "--cores", "1,all", "--scaling", "1", "--repeats", "1",
                   "--sets", "2", "--shoot-size", "48x64", "--workers", "1,2", "--dask", "",
-                  "--out", str(tmp_path)]) == 0
+                  "--baseline", str(root), "--out", str(tmp_path)]) == 0
     results = json.loads((tmp_path / "cores.json").read_text())
     sections = {row["section"] for row in results["rows"]}
     assert sections == {"merge 7 x 24 MP", "peak", "scaling", "first run"}
     assert all(row["peak_mb"] > 10 and row["cpu_seconds"] > 0 for row in results["rows"])
     assert results["ratios"]["1 cores: merge / floor (wall)"] > 0
+    assert results["ratios"]["1 cores: baseline / floor (wall)"] > 0
+    with pytest.raises(SystemExit, match="python -m hdrio runs"):
+        cores(["--size", "64x96", "--cores", "1", "--scaling", "", "--repeats", "1",
+               "--sets", "0", "--baseline", str(tmp_path), "--out", str(tmp_path / "no")])
     assert "merging" in next(row for row in results["rows"]
                              if row["section"] == "scaling")["stages"]
     shoot = json.loads((tmp_path / "farm.json").read_text())

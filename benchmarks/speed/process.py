@@ -78,10 +78,11 @@ def hdrio_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "hdrio"]
 
 
-def timed(argv: list[str], env: dict[str, str] | None = None, cores: int = 0) -> dict:
+def timed(argv: list[str], env: dict[str, str] | None = None, cores: int = 0,
+          cwd: str | Path | None = None) -> dict:
     """Run ``argv`` once, on the first ``cores`` CPUs when given (affinity set before
-    the command starts, so hdrio sizes its threads to it as under ``taskset``):
-    ``{"seconds", "peak_mb", "cpu_seconds", "output"}``.
+    the command starts, so hdrio sizes its threads to it as under ``taskset``), in
+    ``cwd`` when given: ``{"seconds", "peak_mb", "cpu_seconds", "output"}``.
 
     A small Python process starts the command and reads its resources from the OS
     (``getrusage`` of its children: peak resident memory, user + system CPU of every
@@ -91,7 +92,7 @@ def timed(argv: list[str], env: dict[str, str] | None = None, cores: int = 0) ->
     """
     completed = subprocess.run([sys.executable, "-c", _MEASURE, str(cores), *argv],
                                capture_output=True, text=True, check=True,
-                               env={**os.environ, **(env or {})})
+                               env={**os.environ, **(env or {})}, cwd=cwd)
     result = json.loads(completed.stdout.strip().splitlines()[-1])
     if result["returncode"] != 0:
         raise RuntimeError(f"{' '.join(argv[:3])}... failed:\n{result['output'][-1500:]}")
