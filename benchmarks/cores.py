@@ -10,8 +10,8 @@ threads to N as under ``taskset``):
   of ``--repeats``; the ratios to read are the merge's over the floor's, in wall time and
   in CPU seconds, at each N;
 * the merge's peak at 5, 7 and 9 brackets (every CPU);
-* one merge at each N of ``--scaling`` with its progress log: where the wall time goes,
-  stage by stage, as cores are added;
+* one merge at each N of ``--scaling`` with its progress log: where the wall time and
+  the CPU seconds go, stage by stage, as cores are added (``HDRIO_PROGRESS_CPU=1``);
 * with ``--baseline TREE``, the same 7-bracket merge by the ``hdrio`` of ``TREE`` (a
   folder holding another commit's ``hdrio/`` package: ``git archive COMMIT hdrio | tar
   -x -C TREE``), alternated with the two above, so that a change is measured against
@@ -52,7 +52,7 @@ from benchmarks.speed.scene import bracket_stack
 from hdrio.io.images import read_image
 
 DEFAULT_OUT = Path(__file__).parent / "results"
-_STAGE = re.compile(r"^\[\s*([\d.]+) s\] (.+)$", re.MULTILINE)
+_STAGE = re.compile(r"^\[\s*([\d.]+) s(?:, CPU\s*([\d.]+) s)?\] (.+)$", re.MULTILINE)
 
 
 def all_cores() -> int:
@@ -68,7 +68,7 @@ def stages(log: str, seconds: float) -> dict[str, float]:
     from its start to the next stage's; the write's from the summary (``wrote: ... in
     0.84 s``); and the rest of the process's ``seconds``: start-up (imports) before the
     log's clock starts, and the summary and exit after the write."""
-    marks = [(float(t), label.split(" ")[0]) for t, label in _STAGE.findall(log)]
+    marks = [(float(t), label.split(" ")[0]) for t, _, label in _STAGE.findall(log)]
     written = _WROTE.search(log)
     ends = [t for t, _ in marks[1:]] + [marks[-1][0] + (float(written.group(1))
                                                        if written else 0.0)]
@@ -76,6 +76,22 @@ def stages(log: str, seconds: float) -> dict[str, float]:
     for (start, label), end in zip(marks, ends):
         result[label] = result.get(label, 0.0) + end - start
     result["start-up and exit"] = seconds - sum(result.values())
+    return result
+
+
+def cpu_stages(log: str, cpu_seconds: float) -> dict[str, float]:
+    """CPU seconds of each stage of a progress log written with ``HDRIO_PROGRESS_CPU=1``
+    (``[  1.26 s, CPU   4.80 s] camera response``): the process's CPU before its first
+    line (imports, parsing, checking the inputs), each stage's from its line to the
+    next, the last one's (the write, the summary and the exit) to the process's
+    ``cpu_seconds``. Empty when the log has no CPU column."""
+    marks = [(float(cpu), label.split(" ")[0]) for _, cpu, label in _STAGE.findall(log)
+             if cpu]
+    if not marks:
+        return {}
+    result = {"before the first line": marks[0][0]}
+    for (start, label), (end, _) in zip(marks, [*marks[1:], (cpu_seconds, "")]):
+        result[label] = result.get(label, 0.0) + end - start
     return result
 
 
@@ -144,11 +160,12 @@ def scaling_rows(paths: list[str], exposures: list[str], folder: Path, cores: li
     for count in cores:
         found = timed([*hdrio_command(), "merge", *paths[1:8], "--exposures",
                        ",".join(exposures[1:8]), "-o", str(folder / "scaling.exr")],
-                      env, count)
+                      {**env, "HDRIO_PROGRESS_CPU": "1"}, count, cwd=folder)
         rows.append({"section": "scaling", "cores": count,
                      "method": "hdrio merge 7 JPEGs, stages", "seconds": found["seconds"],
                      "cpu_seconds": found["cpu_seconds"], "peak_mb": found["peak_mb"],
                      "stages": stages(found["output"], found["seconds"]),
+                     "cpu_stages": cpu_stages(found["output"], found["cpu_seconds"]),
                      "log": found["output"]})
     return rows
 
@@ -190,6 +207,10 @@ def table(rows: list[dict]) -> list[str]:
         if "stages" in row:
             parts = ", ".join(f"{k} {v:.2f}" for k, v in row["stages"].items())
             lines.append(f"stages at {row['cores']} cores ({row['seconds']:.2f} s): {parts}")
+        if row.get("cpu_stages"):
+            parts = ", ".join(f"{k} {v:.2f}" for k, v in row["cpu_stages"].items())
+            lines.append(f"CPU seconds at {row['cores']} cores ({row['cpu_seconds']:.2f} s): "
+                         f"{parts}")
     return lines
 
 

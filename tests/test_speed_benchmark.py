@@ -73,6 +73,32 @@ def test_a_merges_log_is_split_into_its_stages():
     assert found["start-up and exit"] == pytest.approx(3.0 - 2.40)
 
 
+def test_a_log_with_the_cpu_column_gives_each_stages_cpu_seconds(monkeypatch):
+    import io
+
+    from benchmarks.cores import cpu_stages, stages
+    from hdrio.cli.progress import Progress
+
+    monkeypatch.setenv("HDRIO_PROGRESS_CPU", "1")
+    stream = io.StringIO()
+    progress = Progress(stream=stream)
+    progress.step("reading 7 brackets")
+    progress.step("camera response: Debevec1997")
+    first, second = stream.getvalue().splitlines()
+    assert first.startswith("[") and ", CPU " in first and first.endswith("reading 7 brackets")
+    # the process's CPU seconds since it started, at each line: never less at a later one
+    assert float(second.split("CPU")[1].split()[0]) >= float(first.split("CPU")[1].split()[0])
+    log = ("[  0.00 s, CPU   4.80 s] reading 7 brackets\n"
+           "[  0.56 s, CPU   7.30 s] camera response: Debevec1997\n"
+           "[  1.00 s, CPU   7.90 s] writing out.exr\n"
+           "wrote:     out.exr (half, zip) in 0.60 s\n")
+    assert stages(log, 2.0)["reading"] == pytest.approx(0.56)
+    found = cpu_stages(log, 12.0)
+    assert found == pytest.approx({"before the first line": 4.8, "reading": 2.5,
+                                   "camera": 0.6, "writing": 4.1})
+    assert cpu_stages("[  0.00 s] reading 7 brackets\n", 1.0) == {}
+
+
 def test_the_many_core_run_measures_the_merge_its_floor_and_a_shoot(tmp_path):
     # What docs/speed.md's "Many cores" table comes from, on a tiny ladder: every row a
     # process with its CPU seconds and peak from the OS, the ratios from rows of one run.
