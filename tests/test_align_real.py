@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -88,3 +90,21 @@ def test_still_tripod_stack_is_not_deghosted(shared_data):
     assert auto.motion.deghosting.fraction < 0.001
     change = np.abs(auto.radiance / off.radiance - 1.0)
     assert np.median(change) < 0.001 and np.percentile(change, 99.9) < 0.01
+
+
+def test_memorials_listed_exposures_are_not_read_as_motion(shared_data):
+    """memorial (16 scans, still): its exposure list says 1/1024 .. 32 s in whole stops;
+    the data say 1/1161 .. 30.19 s. A bracket off by a few per cent disagrees with its
+    neighbours everywhere, which the motion test read as motion where the noise is low:
+    5.11 % of the pixels deghosted with the README's command. The test now reads the
+    data's exposures (the merge keeps the list's): 1.64 %. Bound 2.5 %: the list read
+    again fails it. The issue asks for 0 (docs/motion.md says what is left)."""
+    folder = shared_data("memorial_debevec")
+    stack = read_brackets(sorted(folder.glob("memorial00*.png")),
+                          exposures_from=folder / "exposures.csv")
+    result = merge_stack(stack, replace(AUTO, exclude_colour=(0, 0, 255)))
+    assert result.exposures is not None and not result.exposures.used
+    assert result.exposures.for_the_motion_test() is not None
+    assert result.motion.deghosting.fraction < 0.025, result.motion.deghosting.fraction
+    # the merge kept the list's exposures
+    assert sorted(result.stack.exposures) == sorted(stack.exposures)

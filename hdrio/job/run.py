@@ -74,8 +74,10 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")
     solved = response
+    test_exposures = None if exposure_check is None else exposure_check.for_the_motion_test()
     response, tested, clip = stages.deghost_stage(stack, response, motion, plan, resolve,
-                                                  prepared.excluded, say, surveys)
+                                                  prepared.excluded, say, surveys,
+                                                  test_exposures)
     clock.lap("deghost")
     merged_stack, skipped.covering = stages.covering_bracket(stack, prepared, plan)
     fitted, survey = tested if response is solved else None, None

@@ -253,7 +253,8 @@ def held_survey(stack: ExposureStack, response: CameraResponse, motion: Motion,
 
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
-                  say: Progress, surveys: Surveys | None = None
+                  say: Progress, surveys: Surveys | None = None,
+                  test_exposures: np.ndarray | None = None
                   ) -> tuple[CameraResponse, NoiseModel | None, ClipPolicy | None]:
     """Movers dropped (``--deghost``: ``motion.keep``) and the response re-solved
     without them (``solve``; ``None`` under exclusions): ``(response, noise, clip)``,
@@ -264,7 +265,10 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
     observations the merge leaves out (``--mask``, ``--exclude-color``), left out of the
     noise fit and the test too. ``surveys``: the response solve's measures
     (:class:`hdrio.merge.saturation.Surveys`), read again where they hold: the same
-    codes (not warped), exposures and response, nothing excluded."""
+    codes (not warped), exposures and response, nothing excluded. ``test_exposures``
+    (:meth:`hdrio.merge.exposure_check.ExposureCheck.for_the_motion_test`): the
+    exposures the data say, when the metadata's are off; the test then reads them, with
+    a noise model fitted on them, while the merge keeps ``stack``'s and ``noise``."""
     if plan.deghosts:
         say("deghosting")
     noise = clip = None
@@ -275,8 +279,16 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
         clip = clip_policy(plan.options.saturation, stack.codes, response, noise,
                            stack.exposures, exclude=excluded, survey=survey)
     mixed = clip.kernel_args() if clip is not None and clip.neutral else None
-    return deghost_step(stack, response, motion, plan.options.deghost, solve, noise,
-                        excluded, mixed), noise, clip
+    tested, tested_noise, resolve = stack, noise, solve
+    if plan.deghosts and test_exposures is not None and len(test_exposures) == stack.count:
+        tested = replace(stack, exposures=np.asarray(test_exposures, np.float64))
+        tested_noise = stack_noise(tested, response, excluded)
+        if solve is not None:  # the response the merge reads: in the merge's exposures
+            def resolve(_tested: ExposureStack, exclude: np.ndarray | None
+                        ) -> CameraResponse:
+                return solve(stack, exclude)
+    return deghost_step(tested, response, motion, plan.options.deghost, resolve,
+                        tested_noise, excluded, mixed), noise, clip
 
 
 def noise_stage(stack: ExposureStack, response: CameraResponse, plan: MergePlan,
