@@ -187,12 +187,14 @@ class ExposureCheck:
         (docs/motion.md, "Memorial's listed exposures")."""
         if self.used or self.inferred or self.estimated.size < 2:
             return None
+        spread = self.spread()
+        return self.estimated if np.isfinite(spread) and spread > TEST_STOPS else None
+
+    def spread(self) -> float:
+        """Stops the metadata's exposure of the bracket most off is from the data's,
+        beyond the brackets' common offset (NaN where an exposure is unknown)."""
         stops = self.stops
-        if not np.all(np.isfinite(stops)):
-            return None
-        if np.max(np.abs(stops - np.median(stops))) <= TEST_STOPS:
-            return None
-        return self.estimated
+        return float(np.max(np.abs(stops - np.median(stops))))
 
     def warnings(self, source: str = "") -> list[str]:
         """One line per bracket off by more than :data:`WARN_STOPS`, naming its file and
