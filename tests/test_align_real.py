@@ -118,3 +118,9 @@ def test_memorials_listed_exposures_are_not_read_as_motion(shared_data, tmp_path
     line = next(line for line in stdout.splitlines() if line.startswith("deghost:"))
     assert line.endswith("; tested with the exposures the data say (the merge's are off "
                          "by up to 0.18 stop)"), line
+    from hdrio.io.header import read_header
+
+    header = read_header(tmp_path / "m.exr")
+    tested = [float(t) for t in header["hdrio:deghostExposures"]]
+    assert len(tested) == 16 and tested == sorted(tested)
+    assert tested[0] == pytest.approx(1 / 1161, rel=0.01)  # the list says 1/1024
