@@ -104,7 +104,7 @@ def test_memorials_listed_exposures_are_not_read_as_motion(shared_data, tmp_path
                           exposures_from=folder / "exposures.csv")
     result = merge_stack(stack, replace(AUTO, exclude_colour=(0, 0, 255)))
     assert result.exposures is not None and not result.exposures.used
-    assert result.exposures.for_the_motion_test() is not None
+    assert result.motion_test_exposures is not None
     assert result.motion.deghosting.fraction < 0.025, result.motion.deghosting.fraction
     # the merge kept the list's exposures
     assert sorted(result.stack.exposures) == sorted(stack.exposures)

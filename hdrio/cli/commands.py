@@ -219,12 +219,11 @@ def motion_lines(result: MergeResult) -> list[str]:
                         "bracket" if motion.uncovered else ""))
         lines += [f"           {line}" for line in motion.alignment.describe(files)]
     if motion.deghosting is not None:
-        data = None if result.exposures is None else result.exposures.for_the_motion_test()
         lines.append(f"deghost:   {100 * motion.deghosting.fraction:.2f} % of pixels had a "
                      f"bracket dropped for motion, {result.timings.get('deghost', 0):.2f} s"
-                     + ("" if data is None else "; tested with the exposures the data say "
-                        f"(the merge's are off by up to {result.exposures.spread():.2f} "
-                        "stop)"))
+                     + ("" if result.motion_test_exposures is None else
+                        "; tested with the exposures the data say (the merge's are off by "
+                        f"up to {result.exposures.spread():.2f} stop)"))
     return lines
 
 

@@ -168,10 +168,9 @@ def motion_attributes(result: MergeResult) -> dict[str, object]:
             attributes["hdrio:alignUnregisteredFraction"] = motion.unregistered_fraction()
     if motion.deghosting is not None:
         attributes["hdrio:deghostedFraction"] = float(motion.deghosting.fraction)
-        tested = (None if result.exposures is None
-                  else result.exposures.for_the_motion_test())
-        if tested is not None:
-            attributes["hdrio:deghostExposures"] = [exposure_text(t) for t in tested]
+        if result.motion_test_exposures is not None:
+            attributes["hdrio:deghostExposures"] = [
+                exposure_text(t) for t in result.motion_test_exposures]
     return attributes
 
 

@@ -68,6 +68,10 @@ class MergeResult:
     motion: Motion = field(default_factory=Motion)
     exposures: ExposureCheck | None = None
     """The metadata's exposures against the data's (three brackets or more)."""
+    motion_test_exposures: np.ndarray | None = None
+    """The data's exposures, which deghosting's test read instead of the merge's
+    (:meth:`~hdrio.merge.exposure_check.ExposureCheck.for_the_motion_test`), else
+    ``None``."""
     nd: NDReport | None = None
     unseen: np.ndarray | None = None
     """``(H, W)`` bool: excluded in every bracket (radiance 0, alpha 0), else ``None``."""

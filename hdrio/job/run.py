@@ -74,7 +74,7 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")
     solved = response
-    test_exposures = None if exposure_check is None else exposure_check.for_the_motion_test()
+    test_exposures = stages.motion_test_exposures(stack, motion, plan, exposure_check)
     response, tested, clip = stages.deghost_stage(stack, response, motion, plan, resolve,
                                                   prepared.excluded, say, surveys,
                                                   test_exposures)
@@ -116,7 +116,8 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
                        replace(options, colourspace=colour.encoding.colour_science), plan,
                        timings=clock.wall, cpu_timings=clock.cpu, colour=colour,
                        skipped=skipped, noise=noise, uncertainty=uncertainty, motion=motion,
-                       exposures=exposure_check, nd=nd_report, unseen=unseen,
+                       exposures=exposure_check, motion_test_exposures=test_exposures,
+                       nd=nd_report, unseen=unseen,
                        highlights=highlights)
 
 

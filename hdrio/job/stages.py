@@ -251,6 +251,18 @@ def held_survey(stack: ExposureStack, response: CameraResponse, motion: Motion,
         stack.files, stack.code_max, is_raw_stack(stack)))
 
 
+def motion_test_exposures(stack: ExposureStack, motion: Motion, plan: MergePlan,
+                          check: ExposureCheck | None) -> np.ndarray | None:
+    """The exposures deghosting's test reads instead of ``stack``'s: the data's, where
+    :meth:`~hdrio.merge.exposure_check.ExposureCheck.for_the_motion_test` says so and
+    the brackets were not warped (the check ran before they were registered: its
+    estimates hold if none moved); else ``None``."""
+    if not plan.deghosts or check is None or motion.warped:
+        return None
+    found = check.for_the_motion_test()
+    return found if found is not None and len(found) == stack.count else None
+
+
 def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion,
                   plan: MergePlan, solve: Solve | None, excluded: np.ndarray | None,
                   say: Progress, surveys: Surveys | None = None,
@@ -266,9 +278,9 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
     noise fit and the test too. ``surveys``: the response solve's measures
     (:class:`hdrio.merge.saturation.Surveys`), read again where they hold: the same
     codes (not warped), exposures and response, nothing excluded. ``test_exposures``
-    (:meth:`hdrio.merge.exposure_check.ExposureCheck.for_the_motion_test`): the
-    exposures the data say, when the metadata's are off; the test then reads them, with
-    a noise model fitted on them, while the merge keeps ``stack``'s and ``noise``."""
+    (:func:`motion_test_exposures`): the exposures the data say, when the metadata's
+    are off; the test then reads them, with a noise model fitted on them, while the
+    merge keeps ``stack``'s, ``noise`` and a response re-solved in ``stack``'s."""
     if plan.deghosts:
         say("deghosting")
     noise = clip = None
@@ -280,7 +292,7 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
                            stack.exposures, exclude=excluded, survey=survey)
     mixed = clip.kernel_args() if clip is not None and clip.neutral else None
     tested, tested_noise, resolve = stack, noise, solve
-    if plan.deghosts and test_exposures is not None and len(test_exposures) == stack.count:
+    if plan.deghosts and test_exposures is not None:
         tested = replace(stack, exposures=np.asarray(test_exposures, np.float64))
         tested_noise = stack_noise(tested, response, excluded)
         if solve is not None:  # the response the merge reads: in the merge's exposures

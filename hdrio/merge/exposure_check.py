@@ -36,7 +36,11 @@ WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
 TEST_STOPS = 0.03
 """Off by more than this (about 2 %), a bracket's exposure from the data replaces the
-metadata's in deghosting's test (:meth:`ExposureCheck.for_the_motion_test`)."""
+metadata's in deghosting's test (:meth:`ExposureCheck.for_the_motion_test`)..."""
+TEST_MAX_STOPS = 0.5
+"""... and by at most this: further off, the metadata is wrong or the estimate is (brackets
+that moved between exposures: the check runs before they are registered), and the user
+is told (:data:`WARN_STOPS`)."""
 WELL_EXPOSED_CODES = (0.15, 0.9)
 """Codes used, as fractions of ``code_max``: away from the noise floor and the shoulder."""
 MAX_PIXELS = 1 << 18
@@ -175,10 +179,11 @@ class ExposureCheck:
         return np.log2(self.estimated / self.metadata)
 
     def for_the_motion_test(self) -> np.ndarray | None:
-        """The data's exposures, for deghosting's consistency test to read, where the merge
-        keeps the metadata's (not ``used``) and they disagree: a bracket more than
-        :data:`TEST_STOPS` off the others' common offset. ``None`` otherwise (the test
-        then reads the merge's exposures, as it always did).
+        """The data's exposures, for deghosting's consistency test to read on a still
+        stack, where the merge keeps the metadata's (not ``used``) and they disagree: a
+        bracket more than :data:`TEST_STOPS` (and at most :data:`TEST_MAX_STOPS`) off the
+        others' common offset, the estimates in the brackets' order. ``None`` otherwise
+        (the test then reads the merge's exposures, as it always did).
 
         A bracket whose exposure is off by a few per cent disagrees with its neighbours by
         that much everywhere, which the test reads as motion where the noise is low:
@@ -188,7 +193,10 @@ class ExposureCheck:
         if self.used or self.inferred or self.estimated.size < 2:
             return None
         spread = self.spread()
-        return self.estimated if np.isfinite(spread) and spread > TEST_STOPS else None
+        if not (np.isfinite(spread) and TEST_STOPS < spread <= TEST_MAX_STOPS):
+            return None
+        # Shortest first, as the stack: an estimate out of that order is not one to trust.
+        return self.estimated if np.all(np.diff(self.estimated) > 0) else None
 
     def spread(self) -> float:
         """Stops the metadata's exposure of the bracket most off is from the data's,
