@@ -34,9 +34,11 @@ from hdrio.stack import ExposureStack
 
 WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
-TEST_STOPS = 0.03
-"""Off by more than this (about 2 %), a bracket's exposure from the data replaces the
-metadata's in deghosting's test (:meth:`ExposureCheck.for_the_motion_test`)..."""
+TEST_STOPS = 0.1
+"""Off by more than this (about 7 %), a bracket's exposure from the data replaces the
+metadata's in deghosting's test (:meth:`ExposureCheck.for_the_motion_test`): the
+estimates have errors of their own, up to 0.05 stop on a generated JPEG tripod stack
+whose exposures are exact (``tests/hard_cases.py``' ``tripod_stack``)..."""
 TEST_MAX_STOPS = 0.5
 """... and by at most this: further off, the metadata is wrong or the estimate is (brackets
 that moved between exposures: the check runs before they are registered), and the user
