@@ -430,3 +430,28 @@ def test_the_warning_says_where_the_exposure_came_from(source, said):
                           np.array([1 / 1024, 1 / 256]))
     (line,) = check.warnings(source)
     assert line.startswith(f"b.png: exposure 1/512 {said}, the data say 1/256 (+1.00 stop)")
+
+
+def test_the_motion_test_reads_the_datas_exposures_only_where_the_metadatas_are_off():
+    from hdrio.merge.exposure_check import TEST_MAX_STOPS, TEST_STOPS, ExposureCheck
+
+    listed = np.array([1 / 64, 1 / 16, 1 / 4, 1.0])
+    files = ("a", "b", "c", "d")
+
+    def check(stops, **kwargs):
+        return ExposureCheck(files, listed, listed * np.exp2(np.asarray(stops)), **kwargs)
+
+    # a common offset is no disagreement; one bracket off by more than TEST_STOPS is
+    off = TEST_STOPS + 0.02
+    assert check([0.3, 0.3, 0.3, 0.3]).for_the_motion_test() is None
+    assert check([0.0, 0.0, TEST_STOPS - 0.01, 0.0]).for_the_motion_test() is None
+    found = check([0.0, 0.0, off, 0.0]).for_the_motion_test()
+    assert found is not None and np.allclose(found, listed * np.exp2([0, 0, off, 0]))
+    assert check([0.0, 0.0, off, 0.0]).spread() == pytest.approx(off)
+    # not when the merge used them, inferred them, or they are too far off or out of order
+    assert check([0.0, 0.0, off, 0.0], used=True).for_the_motion_test() is None
+    assert check([0.0, 0.0, off, 0.0], inferred="step inferred").for_the_motion_test() is None
+    assert check([0.0, 0.0, TEST_MAX_STOPS + 0.1, 0.0]).for_the_motion_test() is None
+    close = ExposureCheck(files, np.array([1.0, 1.1, 1.2, 1.3]),
+                          np.array([1.0, 1.25, 1.15, 1.3]))  # within 0.5 stop, b beyond c
+    assert 0.1 < close.spread() < 0.5 and close.for_the_motion_test() is None
