@@ -42,13 +42,11 @@ seconds when it began reading, against 1.27 on one CPU and 1.76 on four (docs/sp
 "Many cores"). NumPy's and SciPy's OpenBLAS each start such a pool when they load."""
 
 
-def blas_on_one_thread(environment: dict[str, str] | None = None) -> None:
-    """Keep the BLAS pools (:data:`BLAS_POOLS`) of ``environment`` (this process's by
-    default; read when NumPy and SciPy load, so before they are imported) to one thread,
-    where the user has not sized them."""
-    environment = os.environ if environment is None else environment
+def blas_on_one_thread() -> None:
+    """Keep this process's BLAS pools (:data:`BLAS_POOLS`, read when NumPy and SciPy load,
+    so before they are imported) to one thread, where the user has not sized them."""
     for name in BLAS_POOLS:
-        environment.setdefault(name, "1")
+        os.environ.setdefault(name, "1")
 
 
 def worker_environment(count: int) -> dict[str, str]:

@@ -292,7 +292,7 @@ def deghost_stage(stack: ExposureStack, response: CameraResponse, motion: Motion
                            stack.exposures, exclude=excluded, survey=survey)
     mixed = clip.kernel_args() if clip is not None and clip.neutral else None
     tested, tested_noise, resolve = stack, noise, solve
-    if plan.deghosts and test_exposures is not None:
+    if test_exposures is not None:  # only when deghosting (motion_test_exposures)
         tested = replace(stack, exposures=np.asarray(test_exposures, np.float64))
         tested_noise = stack_noise(tested, response, excluded)
         if solve is not None:  # the response the merge reads: in the merge's exposures
