@@ -58,20 +58,28 @@ def warm_up(*modules: str) -> None:
         return
 
     def prepare() -> None:
-        try:
-            from numba.core.compiler_lock import global_compiler_lock
-            from numba.core.registry import cpu_target
-
-            with global_compiler_lock:
-                cpu_target.target_context.refresh()
-        except Exception:  # noqa: BLE001 - numba's internals moved: the first kernel does it
-            pass
+        prepare_numba()
         for module in modules:
             with contextlib.suppress(ImportError):
                 importlib.import_module(module)
 
     _warming = threading.Thread(target=prepare, name="hdrio-warm-up", daemon=True)
     _warming.start()
+
+
+def prepare_numba() -> None:
+    """Load what the first kernel of a process loads, even one from the disk cache:
+    numba's CPU target, its lowering of NumPy registered (about 1 s, :func:`warm_up`).
+    Runs under numba's compiler lock; nothing when numba's internals moved (the first
+    kernel then does it)."""
+    try:
+        from numba.core.compiler_lock import global_compiler_lock
+        from numba.core.registry import cpu_target
+
+        with global_compiler_lock:
+            cpu_target.target_context.refresh()
+    except Exception:  # noqa: BLE001 - numba's internals moved: the first kernel does it
+        pass
 
 
 def size_numba_threads() -> None:

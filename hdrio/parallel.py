@@ -129,19 +129,33 @@ def limit_heap_arenas() -> bool:
         return False
 
 
-def die_with_parent(parent_pid: int) -> None:
-    """Make this process exit when ``parent_pid`` (its parent) does."""
+def die_with_parent(parent_pid: int, forked: bool = False) -> None:
+    """Make this process exit when ``parent_pid`` (its parent, or with ``forked`` the
+    process whose fork server forked this one) does. On Linux the kernel also kills it
+    when its actual parent dies (a fork server exits once its last client has)."""
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
         except (OSError, AttributeError):
             pass
-    if os.getppid() != parent_pid:  # the parent died before the line above
+
+    def alive() -> bool:
+        if not forked:
+            return os.getppid() == parent_pid
+        try:
+            os.kill(parent_pid, 0)  # signal 0: is there such a process
+        except ProcessLookupError:
+            return False
+        except PermissionError:  # there is, another user's: the id was reused
+            return False
+        return True
+
+    if not alive():  # the parent died before the line above
         os._exit(1)
 
     def watch() -> None:
-        while os.getppid() == parent_pid:
+        while alive():
             time.sleep(_PARENT_POLL_S)
         os._exit(1)
 

@@ -45,9 +45,12 @@ class SlowMerge(MergeSet):
 
 @pytest.fixture(scope="module")
 def client():
-    from hdrio.batch.cluster import local_cluster
+    """Two workers forked from a fork server, as ``--dask local:2`` starts them (the
+    client script below spawns its workers)."""
+    from hdrio.batch.cluster import forked_workers, local_cluster
 
-    with local_cluster(2) as cluster, distributed.Client(cluster) as client:
+    with forked_workers(2, MergeSet()), local_cluster(2) as cluster, \
+            distributed.Client(cluster) as client:
         yield client
 
 
@@ -83,6 +86,19 @@ def test_cli_on_the_cluster_writes_what_the_serial_run_writes(shoot, tmp_path, c
     assert len(a) == SETS and a.keys() == b.keys()
     for name in a:  # same code on the same files: bit for bit
         np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_local_workers_are_forked_with_what_a_set_needs(client):
+    """On Linux the workers come from hdrio's fork server, which had imported what a
+    set needs and loaded numba's CPU target before it forked them."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("workers are forked on Linux only")
+
+    def loaded():
+        return ("hdrio.batch.worker_start" in sys.modules and "hdrio.job.run" in sys.modules
+                and "numba.cpython.cmathimpl" in sys.modules)  # numba's CPU target loaded
+
+    assert list(client.run(loaded).values()) == [True, True]
 
 
 def test_a_worker_killed_mid_run_loses_no_set(shoot, tmp_path, client):

@@ -32,6 +32,22 @@ def _children(pid: int) -> list[int]:
     return found
 
 
+def _pool_workers(pid: int) -> list[int]:
+    """The pool workers of ``pid``: its children, or on Linux those of its fork server
+    (hdrio.batch.pool.fork_server), multiprocessing's resource tracker left out."""
+    found = []
+    for child in _children(pid):
+        try:
+            command = Path(f"/proc/{child}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if b"multiprocessing.forkserver" in command:
+            found += _children(child)
+        elif b"resource_tracker" not in command:
+            found.append(child)
+    return found
+
+
 def _alive(pid: int) -> bool:
     try:
         return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
@@ -75,10 +91,9 @@ def test_killing_the_parent_takes_its_pool_workers_down(shoot, tmp_path):
                                f"{tmp_path}/hdr/{{first_stem}}.exr"], cwd=ROOT,
                               env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:
-        # two pool workers (multiprocessing may add its resource tracker)
-        assert _wait_until(lambda: len(_children(parent.pid)) >= 2, 60)
+        assert _wait_until(lambda: len(_pool_workers(parent.pid)) >= 2, 60)
         time.sleep(1.0)  # the workers are past their start-up
-        workers = _children(parent.pid)
+        workers = _pool_workers(parent.pid) + _children(parent.pid)  # and the server
     finally:
         parent.send_signal(signal.SIGKILL)
         parent.wait()

@@ -9,10 +9,20 @@ is reported and the others go on.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 from typing import Any
 
-from hdrio.batch.pool import OnResult, SetResult, Work, run_set, worker_threads
+from hdrio.batch.pool import (
+    WORKER_START,
+    OnResult,
+    SetResult,
+    Work,
+    fork_server,
+    run_set,
+    work_module,
+    worker_threads,
+)
 from hdrio.batch.tasks import SetTask
 
 LOCAL = "local"
@@ -62,6 +72,25 @@ def local_cluster(workers: int | None = None) -> Any:
         return distributed.LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True,
             dashboard_address=":0", env=worker_environment(worker_threads(workers)))
+
+
+@contextlib.contextmanager
+def forked_workers(workers: int | None = None, work: Work | None = None) -> Iterator[None]:
+    """Inside, the workers of a :func:`local_cluster` of ``workers`` are forked from a
+    fork server that has imported ``distributed``, what a set needs and the module of
+    ``work`` (:func:`hdrio.batch.pool.fork_server`): a worker then starts without
+    importing them itself. A worker the nanny restarts is forked too. Leave it after the
+    cluster is closed. Elsewhere than Linux, spawned workers as before."""
+    import dask
+
+    from hdrio.parallel import threads
+
+    _distributed()
+    share = worker_threads(workers or threads())
+    modules = ["distributed", WORKER_START] + ([work_module(work)] if work else [])
+    with fork_server(share, *modules) as forked, dask.config.set(
+            {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}):
+        yield
 
 
 def run_dask(tasks: Sequence[SetTask], work: Work, client: Any,

@@ -8,6 +8,7 @@ Here the rest of the chain after ``--group`` becomes the work of each set, and i
 
 from __future__ import annotations
 
+import contextlib
 import io
 from functools import partial
 from pathlib import Path
@@ -193,9 +194,11 @@ def run_set(steps: list[Step], settings: dict[str, Any], verbose: bool,
     return True, out.getvalue()
 
 
-def _client(address: str):
-    """``(client, cluster or None)`` for ``--dask``."""
-    from hdrio.batch.cluster import LOCAL, local_cluster, parse_address
+@contextlib.contextmanager
+def _client(address: str, work):
+    """The ``distributed.Client`` of ``--dask``, closed on leaving (and a local cluster
+    with it, its workers forked: :func:`hdrio.batch.cluster.forked_workers`)."""
+    from hdrio.batch.cluster import LOCAL, forked_workers, local_cluster, parse_address
 
     try:
         from distributed import Client
@@ -203,12 +206,16 @@ def _client(address: str):
         raise ChainError("--dask needs Dask: pip install 'hdrio[farm]'") from None
     where, workers = parse_address(address)
     if where == LOCAL:
-        cluster = local_cluster(workers)
-        return Client(cluster), cluster
+        with forked_workers(workers, work), local_cluster(workers) as cluster, \
+                Client(cluster) as client:
+            yield client
+        return
     try:
-        return Client(where, timeout=30), None
+        client = Client(where, timeout=30)
     except OSError as error:
         raise ChainError(f"--dask {address}: cannot reach the scheduler ({error})") from None
+    with client:
+        yield client
 
 
 def _check_group(chain: Chain, _values: list[str]) -> None:
@@ -258,17 +265,10 @@ def run_groups(chain: Chain, _values: list[str], rest: list[Step],
             chain.say(f"    {line}")
 
     work = partial(chain.run_set or run_set, rest, chain.settings, not chain.progress.quiet)
-    client = cluster = None
-    if chain.settings.get("dask"):
-        client, cluster = _client(chain.settings["dask"])
-    try:
+    with (_client(chain.settings["dask"], work) if chain.settings.get("dask")
+          else contextlib.nullcontext()) as client:
         results = run_sets(tasks, work, client=client, workers=chain.settings.get("threads"),
                            on_result=report)
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
     failed = sorted(result.index for result in results if not result.ok)
     if failed:
         raise ChainError(f"{len(failed)} of {len(todo)} sets failed (sets "

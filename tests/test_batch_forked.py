@@ -1,0 +1,99 @@
+"""Workers forked from hdrio's fork server (Linux): what they have loaded, the share of
+threads they are given, and the server gone once the batch is done; the pool's and
+``--dask local:N``'s."""
+
+from __future__ import annotations
+
+import multiprocessing.forkserver
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hdrio.batch import SetTask, run_local
+from hdrio.batch.pool import worker_threads
+from hdrio.cli import main
+from hdrio.io.images import read_image
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
+                                reason="workers are forked on Linux only")
+LADDER = (1 / 64, 1 / 16, 1 / 4)
+
+
+def _server_pid():
+    return multiprocessing.forkserver._forkserver._forkserver_pid  # noqa: SLF001
+
+
+@dataclass(frozen=True)
+class Report:
+    """A set's work that says what its worker had loaded before it, and its threads."""
+
+    parent: int
+
+    def __call__(self, task: SetTask) -> tuple[bool, str]:
+        import numba
+
+        return True, " ".join(map(str, (
+            "hdrio.batch.worker_start" in sys.modules, "hdrio.job.run" in sys.modules,
+            "numba.cpython.cmathimpl" in sys.modules,  # numba's CPU target loaded
+            os.environ.get("HDRIO_THREADS"), numba.config.NUMBA_NUM_THREADS,
+            os.getppid() != self.parent)))
+
+
+def test_pool_workers_are_forked_with_what_a_set_needs_and_their_share(tmp_path):
+    assert _server_pid() is None
+    tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
+                     status="run") for k in range(1, 5)]
+    results = run_local(tasks, Report(os.getpid()), workers=2)
+    share = worker_threads(2)  # numba's pool is sized to it when the server loads numba
+    assert {r.printed for r in results} == {f"True True True {share} {share} True"}
+    assert _server_pid() is None  # stopped with the pool
+
+
+@pytest.mark.slow
+def test_the_command_on_a_local_cluster_writes_what_the_serial_run_writes(
+        write_brackets, tmp_path, capsys, monkeypatch):
+    """``--dask local:2``: a cluster of its own, its workers forked, the fork server
+    gone once the command is done."""
+    pytest.importorskip("distributed", reason="Dask tests need the farm extra")
+    import hdrio.batch.cluster as cluster
+
+    shoot = tmp_path / "shoot"
+    for letter in "abcd":
+        write_brackets(LADDER, folder=shoot, size=(16, 24),
+                       names=[f"pos_{letter}_1_{round(1 / t)}.png" for t in LADDER])
+    forked = []
+    server = cluster.fork_server
+
+    def spy(*args, **kwargs):
+        manager = server(*args, **kwargs)
+
+        class Spy:
+            def __enter__(self):
+                forked.append(manager.__enter__())
+                return forked[-1]
+
+            def __exit__(self, *error):
+                return manager.__exit__(*error)
+
+        return Spy()
+
+    monkeypatch.setattr(cluster, "fork_server", spy)
+    serial, farm = tmp_path / "serial", tmp_path / "farm"
+    assert main(["--threads", "1", str(shoot), "--group", "--merge",
+                 "-o", f"{serial}/{{first_stem}}.exr"]) == 0
+    assert _server_pid() is None
+    assert main([str(shoot), "--dask", "local:2", "--group", "--merge",
+                 "-o", f"{farm}/{{first_stem}}.exr"]) == 0, capsys.readouterr().err
+    assert forked == [True] and _server_pid() is None
+
+    def pixels(folder: Path) -> dict[str, np.ndarray]:
+        return {p.name: read_image(p)[0] for p in sorted(folder.glob("*.exr"))}
+
+    a, b = pixels(serial), pixels(farm)
+    assert len(a) == 4 and a.keys() == b.keys()
+    for name in a:  # same code on the same files: bit for bit
+        np.testing.assert_array_equal(a[name], b[name])
