@@ -95,6 +95,7 @@ def size_numba_threads() -> None:
 
 STAGES: dict[str, tuple[str, ...]] = {
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise_fit:_clipped_near",
+              "hdrio.radiometry.cliptest:_flag_grid",
               "hdrio.io.half:_to_half_values", "hdrio.cms.check_counts:count_pixels"),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.consistency:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
@@ -194,6 +195,26 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                    stderr=subprocess.DEVNULL, text=True)
         _pending.update((name.partition("=")[0], process) for name in names)
+
+
+FILLED = ("motion", "merge")
+"""The stages :func:`fill_cache` compiles by default: what ``auto`` runs on most stacks."""
+
+
+def fill_cache(stages: tuple[str, ...] = FILLED) -> list[str]:
+    """Compile ``stages`` (keys of :data:`STAGES`) whose kernels are not cached, into the
+    disk cache, each in a process of its own (:mod:`hdrio.tools.precompile`), all at once;
+    return once they are done, with the stages compiled. What a batch's fork server does
+    before it forks the workers (:mod:`hdrio.batch.worker_start`): each worker then loads
+    the kernels instead of compiling them all again. This process compiles nothing and
+    starts no thread."""
+    todo = [stage for stage in stages if not is_stage_cached(stage)]
+    processes = [subprocess.Popen([sys.executable, "-m", "hdrio.tools.precompile", stage],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL) for stage in todo]
+    for process in processes:
+        process.wait()
+    return todo
 
 
 def _started_or_cached(stage: str) -> bool:

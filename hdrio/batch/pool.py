@@ -161,6 +161,16 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
     return results
 
 
+def forks_workers() -> bool:
+    """Whether :func:`fork_server` would start a fork server now (Linux, and none of
+    this process's running)."""
+    import multiprocessing.forkserver as forkserver
+
+    server = forkserver._forkserver  # noqa: SLF001
+    return (sys.platform.startswith("linux") and hasattr(server, "_stop")
+            and getattr(server, "_forkserver_pid", None) is None)
+
+
 def work_module(work: Work) -> str:
     """The module that defines ``work`` (a function, a ``functools.partial`` of one, or
     a callable object): what a worker imports to unpickle it."""
@@ -185,8 +195,7 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
     import multiprocessing.forkserver as forkserver
 
     server = forkserver._forkserver  # noqa: SLF001 - the module's one server, to stop
-    if (not sys.platform.startswith("linux") or not hasattr(server, "_stop")
-            or getattr(server, "_forkserver_pid", None) is not None):
+    if not forks_workers():
         yield False
         return
     forkserver.set_forkserver_preload(list(modules))

@@ -2,15 +2,18 @@
 forks the workers (:func:`hdrio.batch.pool.fork_server`): the merge's stages imported,
 numba's CPU target loaded (:func:`hdrio.jit.prepare_numba`); the server also imports the
 module of the set's work (the chain's, for ``--group``). Each worker forked from the
-server has them already; spawned, each paid for them itself. Nothing but a fork server
-imports this module."""
+server has them already; spawned, each paid for them itself. On a first run the kernels
+of the merge and of alignment's and deghosting's tests (8-bit RGB brackets, the common
+case) are compiled into the disk cache first, once (:func:`hdrio.jit.fill_cache`), where
+each worker used to compile them all itself. Nothing but a fork server imports this
+module."""
 
 from __future__ import annotations
 
 import contextlib
 import importlib
 
-from hdrio.jit import prepare_numba
+from hdrio.jit import fill_cache, prepare_numba
 
 MODULES = ("hdrio.batch.pool", "hdrio.job.run", "hdrio.job.stages",
            "hdrio.align.motion", "hdrio.align.deghost", "hdrio.merge.masked",
@@ -23,3 +26,4 @@ for _module in MODULES:
     with contextlib.suppress(ImportError):
         importlib.import_module(_module)
 prepare_numba()
+fill_cache()

@@ -194,6 +194,21 @@ def run_set(steps: list[Step], settings: dict[str, Any], verbose: bool,
     return True, out.getvalue()
 
 
+def _compiles_first(settings: dict[str, Any], sets: int) -> bool:
+    """Whether the workers' fork server compiles kernels before it forks them
+    (:mod:`hdrio.batch.worker_start`): a pool of several workers or ``--dask local``,
+    forked, on a first run."""
+    from hdrio.batch.cluster import LOCAL, parse_address
+    from hdrio.batch.pool import forks_workers
+    from hdrio.jit import FILLED, is_stage_cached
+    from hdrio.parallel import threads
+
+    address = settings.get("dask")
+    forked = (parse_address(address)[0] == LOCAL if address
+              else min(settings.get("threads") or threads(), sets) > 1)
+    return forked and forks_workers() and not all(map(is_stage_cached, FILLED))
+
+
 @contextlib.contextmanager
 def _client(address: str, work):
     """The ``distributed.Client`` of ``--dask``, closed on leaving (and a local cluster
@@ -265,6 +280,9 @@ def run_groups(chain: Chain, _values: list[str], rest: list[Step],
             chain.say(f"    {line}")
 
     work = partial(chain.run_set or run_set, rest, chain.settings, not chain.progress.quiet)
+    if _compiles_first(chain.settings, len(todo)):
+        chain.say("compiling kernels (first run only), once before the workers start; "
+                  "later runs load them from the cache")
     with (_client(chain.settings["dask"], work) if chain.settings.get("dask")
           else contextlib.nullcontext()) as client:
         results = run_sets(tasks, work, client=client, workers=chain.settings.get("threads"),

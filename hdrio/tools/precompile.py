@@ -15,12 +15,15 @@ from hdrio.parallel import die_with_parent
 
 
 def _compile_merge() -> None:
-    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), the noise
-    fit's look for clipped neighbours, and the write's conversion of RGB to half and the
-    check that counts its pieces."""
+    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), the clip
+    test of the response's samples, the noise fit's look for clipped neighbours, and the
+    write's conversion of RGB to half and the check that counts its pieces."""
+    from types import SimpleNamespace
+
     from hdrio.cms.checks import StreamingCheck
     from hdrio.io.half import to_half
     from hdrio.merge.weighted_mean import merge_brackets
+    from hdrio.radiometry.cliptest import dropped_observations, untested
     from hdrio.radiometry.noise_fit import near_clipping
     from hdrio.stack import ExposureStack
     from hdrio.tools.synthetic import gamma_inverse_response
@@ -28,6 +31,8 @@ def _compile_merge() -> None:
     codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
     stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
+    dropped_observations(codes.reshape(2, -1, 3),
+                         SimpleNamespace(kernel_args=lambda: untested(255, 3)))
     near_clipping(codes, 2, 250)
     to_half(np.ones((2, 2, 3), np.float32), [1.0] * 3, [0.0] * 3, [1.0] * 3,
             StreamingCheck(compiled=True).add)
