@@ -51,6 +51,8 @@ def test_pool_workers_are_forked_with_what_a_set_needs_and_their_share(tmp_path)
     share = worker_threads(2)  # numba's pool is sized to it when the server loads numba
     assert {r.printed for r in results} == {f"True True True {share} {share} True"}
     assert _server_pid() is None  # stopped with the pool
+    preload = multiprocessing.forkserver._forkserver._preload_modules  # noqa: SLF001
+    assert "hdrio.batch.worker_start" not in preload  # the process's own again
 
 
 @pytest.mark.slow

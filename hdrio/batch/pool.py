@@ -198,6 +198,7 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
     if not forks_workers():
         yield False
         return
+    preload = list(getattr(server, "_preload_modules", ["__main__"]))
     forkserver.set_forkserver_preload(list(modules))
     added = {name: value for name, value in worker_environment(threads).items()
              if name not in os.environ}  # the user's own values stand
@@ -211,3 +212,4 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
         yield True
     finally:
         server._stop()  # noqa: SLF001 - waits for the server, which reaped the workers
+        forkserver.set_forkserver_preload(preload)  # as the process had it
