@@ -95,10 +95,10 @@ def size_numba_threads() -> None:
 
 STAGES: dict[str, tuple[str, ...]] = {
     "merge": ("hdrio.merge.kernel:merge_rows_by_pairs", "hdrio.radiometry.noise_fit:_clipped_near",
-              "hdrio.radiometry.cliptest:_flag_grid",
               "hdrio.io.half:_to_half_values", "hdrio.cms.check_counts:count_pixels"),
     "motion": ("hdrio.align.quick:_read", "hdrio.align.consistency:_consistency"),
     "preview": ("hdrio.tonemap.reinhard2002_kernels:_global_blocks",),
+    "response": ("hdrio.radiometry.cliptest:_flag_grid",),
 }
 """The kernels whose cache stands for each stage's (they compile together). Motion's are
 the still check's and deghosting's, what ``auto`` runs on most stacks; registering a stack
@@ -140,10 +140,12 @@ a process of its own (CFS gives a process of niceness 4 about 40 % of a nice-0 o
 share)."""
 
 ONE_HELPER_BELOW = 4
-"""With fewer CPUs than this, :func:`compile_ahead` starts one process (merge, then the
-preview) and this process compiles alignment's and deghosting's kernels itself when it
-reaches them: on 2 cores a first run is CPU-bound, and each process more costs its
-imports (0.8 s of CPU) for no core of its own."""
+"""With fewer CPUs than this, :func:`compile_ahead` starts one process, for the merge,
+and this process compiles alignment's and deghosting's kernels itself when it reaches
+them, and then the preview's: on 2 cores a first run is CPU-bound, and each process more
+costs its imports (0.8 s of CPU) for no core of its own. (With the preview in the helper
+too, after the merge, ``hdrio demo`` waited 2.2 s for it at the end with a core idle;
+without a motion stage to compile, the helper still does both.)"""
 
 _pending: dict[str, subprocess.Popen] = {}
 """Processes of :func:`compile_ahead` by the stage they compile for."""
@@ -156,11 +158,13 @@ def helper_jobs(cpus: int, stages: list[str]) -> list[tuple[int, list[str]]]:
     """The compile-ahead processes for ``stages`` (names of :mod:`hdrio.tools.precompile`:
     ``motion``, ``merge``, ``preview=OPERATOR``, in the order the job needs them) on
     ``cpus`` CPUs: ``(niceness, stages)`` each. Below :data:`ONE_HELPER_BELOW` CPUs, one
-    process of merge and preview (motion compiles in the job itself); else one process a
-    stage, each later one at a lower priority (the stage the job waits for next should
-    not share its core with one it needs seconds later)."""
+    process of the merge (the job compiles motion's kernels itself, and then the
+    preview's), or of the merge and the preview when there is no motion stage to compile;
+    else one process a stage, each later one at a lower priority (the stage the job
+    waits for next should not share its core with one it needs seconds later)."""
     if cpus < ONE_HELPER_BELOW:
-        ahead = [stage for stage in stages if stage != "motion"]
+        here = {"motion", "preview"} if "motion" in stages else {"motion"}
+        ahead = [stage for stage in stages if stage.partition("=")[0] not in here]
         return [(0, ahead)] if ahead else []
     by_stage = {stage.partition("=")[0]: stage for stage in stages}
     return [(niceness, [by_stage[name]])
@@ -197,24 +201,26 @@ def compile_ahead(preview: str | None, merge: Callable[[], bool], motion: bool =
         _pending.update((name.partition("=")[0], process) for name in names)
 
 
-FILLED = ("motion", "merge")
-"""The stages :func:`fill_cache` compiles by default: what ``auto`` runs on most stacks."""
+FILLED = (("response", "motion"), ("merge",))
+"""The stages :func:`fill_cache` compiles, in two processes: what ``auto`` runs on most
+stacks. (The job's own compile-ahead has no response stage: the job needs its kernel
+before a helper could have imported numba.)"""
 
 
-def fill_cache(stages: tuple[str, ...] = FILLED) -> list[str]:
-    """Compile ``stages`` (keys of :data:`STAGES`) whose kernels are not cached, into the
-    disk cache, each in a process of its own (:mod:`hdrio.tools.precompile`), all at once;
-    return once they are done, with the stages compiled. What a batch's fork server does
-    before it forks the workers (:mod:`hdrio.batch.worker_start`): each worker then loads
-    the kernels instead of compiling them all again. This process compiles nothing and
-    starts no thread."""
-    todo = [stage for stage in stages if not is_stage_cached(stage)]
-    processes = [subprocess.Popen([sys.executable, "-m", "hdrio.tools.precompile", stage],
+def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED) -> list[str]:
+    """Compile the stages (keys of :data:`STAGES`) of ``groups`` whose kernels are not
+    cached, into the disk cache, a process a group (:mod:`hdrio.tools.precompile`), all
+    at once; return once they are done, with the stages compiled. What a batch's fork
+    server does before it forks the workers (:mod:`hdrio.batch.worker_start`): each
+    worker then loads the kernels instead of compiling them all again. This process
+    compiles nothing and starts no thread."""
+    todo = [[stage for stage in group if not is_stage_cached(stage)] for group in groups]
+    processes = [subprocess.Popen([sys.executable, "-m", "hdrio.tools.precompile", *group],
                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL) for stage in todo]
+                                  stderr=subprocess.DEVNULL) for group in todo if group]
     for process in processes:
         process.wait()
-    return todo
+    return [stage for group in todo for stage in group]
 
 
 def _started_or_cached(stage: str) -> bool:

@@ -65,10 +65,12 @@ def test_a_first_merge_says_it_compiles_only_what_is_not_cached(tmp_path, bracke
 
 def test_two_cpus_compile_ahead_in_one_process_and_more_in_one_a_stage():
     stages = ["motion", "merge", "preview=reinhard-local"]
-    # On 2 or 3 CPUs: one process, merge then preview, at full priority; the job
-    # compiles alignment's and deghosting's kernels itself (a process more would cost
-    # its imports and have no core of its own).
-    assert jit.helper_jobs(2, stages) == [(0, ["merge", "preview=reinhard-local"])]
+    # On 2 or 3 CPUs: one process, at full priority, for the merge; the job compiles
+    # alignment's and deghosting's kernels itself (a process more would cost its imports
+    # and have no core of its own), and then the preview's. Without a motion stage to
+    # compile, the process does the merge and then the preview.
+    assert jit.helper_jobs(2, stages) == [(0, ["merge"])]
+    assert jit.helper_jobs(2, stages[1:]) == [(0, ["merge", "preview=reinhard-local"])]
     assert jit.helper_jobs(3, ["motion"]) == []
     # On 4 or more: a process a stage, later stages at a lower priority.
     assert jit.helper_jobs(4, stages) == [(0, ["motion"]), (4, ["merge"]),
@@ -93,11 +95,13 @@ def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
     monkeypatch.setenv("HDRIO_THREADS", "2")
     jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
     jit.compile_ahead("reinhard-global", merge=lambda: True, motion=True)
-    assert started == [["merge", "preview=reinhard-global"]]
+    assert started == [["merge"]]  # on 2 CPUs the job compiles motion, then the preview
     jit._pending.pop("merge")
     jit._finished.add("merge")  # said by the process, waited for
+    jit.compile_ahead("reinhard-local", merge=lambda: True)  # no motion stage to compile
+    assert started == [["merge"], ["preview=reinhard-local"]]
     jit.compile_ahead("reinhard-local", merge=lambda: True)
-    assert started == [["merge", "preview=reinhard-global"]]
+    assert started == [["merge"], ["preview=reinhard-local"]]
 
 
 _WARM_UP = """
@@ -148,8 +152,9 @@ def test_a_first_batch_compiles_once_before_its_workers_start(tmp_path, write_br
     said = "compiling kernels (first run only), once before the workers start"
     assert said in first.stdout + first.stderr
     filled = sorted(path.name for path in cache.rglob("*.nbi"))
-    assert _run(["-c", _CACHED, *jit.FILLED], str(cache)) == " ".join(
-        f"{stage}=True" for stage in jit.FILLED)
+    stages = [stage for group in jit.FILLED for stage in group]
+    assert _run(["-c", _CACHED, *stages], str(cache)) == " ".join(
+        f"{stage}=True" for stage in stages)
     second = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert second.returncode == 0 and said not in second.stdout + second.stderr
     assert sorted(path.name for path in cache.rglob("*.nbi")) == filled

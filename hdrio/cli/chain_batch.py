@@ -206,7 +206,8 @@ def _compiles_first(settings: dict[str, Any], sets: int) -> bool:
     address = settings.get("dask")
     forked = (parse_address(address)[0] == LOCAL if address
               else min(settings.get("threads") or threads(), sets) > 1)
-    return forked and forks_workers() and not all(map(is_stage_cached, FILLED))
+    return forked and forks_workers() and not all(
+        is_stage_cached(stage) for group in FILLED for stage in group)
 
 
 @contextlib.contextmanager

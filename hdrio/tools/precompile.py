@@ -15,15 +15,12 @@ from hdrio.parallel import die_with_parent
 
 
 def _compile_merge() -> None:
-    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), the clip
-    test of the response's samples, the noise fit's look for clipped neighbours, and the
-    write's conversion of RGB to half and the check that counts its pieces."""
-    from types import SimpleNamespace
-
+    """The merge kernel of 8-bit RGB brackets (the pair-table path, JPEG's), the noise
+    fit's look for clipped neighbours, and the write's conversion of RGB to half and the
+    check that counts its pieces."""
     from hdrio.cms.checks import StreamingCheck
     from hdrio.io.half import to_half
     from hdrio.merge.weighted_mean import merge_brackets
-    from hdrio.radiometry.cliptest import dropped_observations, untested
     from hdrio.radiometry.noise_fit import near_clipping
     from hdrio.stack import ExposureStack
     from hdrio.tools.synthetic import gamma_inverse_response
@@ -31,11 +28,20 @@ def _compile_merge() -> None:
     codes = np.arange(2 * 4 * 4 * 3, dtype=np.uint8).reshape(2, 4, 4, 3)
     stack = ExposureStack.from_arrays(codes, [0.25, 1.0])
     merge_brackets(stack, gamma_inverse_response()[0], domain="linear")
-    dropped_observations(codes.reshape(2, -1, 3),
-                         SimpleNamespace(kernel_args=lambda: untested(255, 3)))
     near_clipping(codes, 2, 250)
     to_half(np.ones((2, 2, 3), np.float32), [1.0] * 3, [0.0] * 3, [1.0] * 3,
             StreamingCheck(compiled=True).add)
+
+
+def _compile_response() -> None:
+    """The clip test of the response's samples (8-bit RGB), which the solve's filter
+    runs where a stack mixes its channels after the clip."""
+    from types import SimpleNamespace
+
+    from hdrio.radiometry.cliptest import dropped_observations, untested
+
+    codes = np.arange(2 * 16 * 3, dtype=np.uint8).reshape(2, 16, 3)
+    dropped_observations(codes, SimpleNamespace(kernel_args=lambda: untested(255, 3)))
 
 
 def _compile_motion() -> None:
@@ -59,7 +65,7 @@ def _compile_preview(operator: str) -> None:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m hdrio.tools.precompile [nice=N] merge motion preview=OPERATOR``: compile
+    """``python -m hdrio.tools.precompile [nice=N] merge motion response preview=OPERATOR``: compile
     those kernels in that order (at niceness ``N`` when given; and stop when the process
     that started this one stops), printing each stage's name (``merge``, ``motion``,
     ``preview``) once its kernels are in the cache."""
@@ -70,6 +76,8 @@ def main(argv: Sequence[str]) -> int:
             os.nice(int(value))
         elif name == "merge":
             _compile_merge()
+        elif name == "response":
+            _compile_response()
         elif name == "motion":
             _compile_motion()
         elif name == "preview":
