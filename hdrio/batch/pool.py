@@ -7,12 +7,12 @@ that finished it even if the process that started the batch is gone.
 
 On Linux the pool's workers are forked from a fork server that has already imported what
 a set needs and loaded numba's CPU target (:mod:`hdrio.batch.worker_start`, and the
-module of the work), so a worker
-starts in milliseconds instead of paying those imports and that load (about 1.5 s of CPU
-here) itself; the server is started with the workers' environment
+module of the work), so a worker starts without paying those imports and that load
+(about 1.1 s of CPU a worker here) itself; on a first run the server also compiles the
+common kernels into the cache once. It is started with the workers' environment
 (:func:`hdrio.parallel.worker_environment`), which numba and OpenMP read when they load,
-and stopped when the pool is done (so the workers' CPU time is counted to ``hdrio``, their
-parent's parent). Elsewhere workers are spawned.
+and stopped when the pool is done (so the workers' CPU time is counted to ``hdrio``,
+their parent's parent). Elsewhere workers are spawned.
 
 Pool workers die with their parent: on Linux through ``PR_SET_PDEATHSIG`` (the kernel
 sends SIGKILL when the parent dies; a fork server exits when ``hdrio`` does), and
