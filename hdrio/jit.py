@@ -25,7 +25,7 @@ import importlib
 import subprocess
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 INNER = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 """numba options of a kernel's helper that only other kernels call (``@njit(...,
@@ -211,16 +211,51 @@ def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED) -> list[str]:
     """Compile the stages (keys of :data:`STAGES`) of ``groups`` whose kernels are not
     cached, into the disk cache, a process a group (:mod:`hdrio.tools.precompile`), all
     at once; return once they are done, with the stages compiled. What a batch's fork
-    server does before it forks the workers (:mod:`hdrio.batch.worker_start`): each
-    worker then loads the kernels instead of compiling them all again. This process
-    compiles nothing and starts no thread."""
-    todo = [[stage for stage in group if not is_stage_cached(stage)] for group in groups]
-    processes = [subprocess.Popen([sys.executable, "-m", "hdrio.tools.precompile", *group],
-                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL) for group in todo if group]
-    for process in processes:
-        process.wait()
+    server does before it forks the workers, and a Dask worker started with ``--preload
+    hdrio.batch.worker_start``: each worker then loads the kernels instead of compiling
+    them all again. This process compiles nothing and starts no thread.
+
+    Processes of one user on one machine take turns (a lock file in the temporary
+    folder, where ``fcntl`` has locks): eight workers started at once on a fresh node
+    compile once, and the other seven find the kernels cached."""
+    with _machine_lock("fill-cache"):
+        todo = [[stage for stage in group if not is_stage_cached(stage)]
+                for group in groups]
+        processes = [subprocess.Popen(
+            [sys.executable, "-m", "hdrio.tools.precompile", *group],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for group in todo if group]
+        for process in processes:
+            process.wait()
     return [stage for group in todo for stage in group]
+
+
+@contextlib.contextmanager
+def _machine_lock(name: str) -> Iterator[None]:
+    """Held by one process of this user on this machine at a time (``flock`` on
+    ``hdrio-UID-NAME.lock`` in the temporary folder); no lock where there is no
+    ``fcntl`` (Windows) or the file cannot be opened."""
+    import os
+    import tempfile
+
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    user = os.getuid() if hasattr(os, "getuid") else "user"
+    path = os.path.join(tempfile.gettempdir(), f"hdrio-{user}-{name}.lock")
+    try:
+        handle = open(path, "a")  # noqa: SIM115 - held open for the lock's lifetime
+    except OSError:
+        yield
+        return
+    with handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def _started_or_cached(stage: str) -> bool:

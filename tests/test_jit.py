@@ -158,3 +158,19 @@ def test_a_first_batch_compiles_once_before_its_workers_start(tmp_path, write_br
     second = subprocess.run(command, capture_output=True, text=True, env=env, timeout=900)
     assert second.returncode == 0 and said not in second.stdout + second.stderr
     assert sorted(path.name for path in cache.rglob("*.nbi")) == filled
+
+
+@pytest.mark.skipif(sys.platform.startswith("win"), reason="fcntl's locks")
+def test_workers_starting_at_once_on_a_fresh_node_compile_once(tmp_path):
+    """Two processes fill an empty cache at the same moment (as the workers of ``dask
+    worker --nworkers N --preload hdrio.batch.worker_start`` do on a fresh node): one
+    compiles every stage, the other waits for it and finds them all cached."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache"),
+           "TMPDIR": str(tmp_path)}  # the lock file's folder, this test's own
+    code = "from hdrio import jit; print(jit.fill_cache())"
+    processes = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                                  text=True, env=env) for _ in range(2)]
+    said = sorted(process.communicate(timeout=600)[0].strip() for process in processes)
+    assert all(process.returncode == 0 for process in processes)
+    stages = [stage for group in jit.FILLED for stage in group]
+    assert said == sorted(["[]", repr(stages)])

@@ -5,8 +5,9 @@ module of the set's work (the chain's, for ``--group``). Each worker forked from
 server has them already; spawned, each paid for them itself. On a first run the kernels
 of the merge and of alignment's and deghosting's tests (8-bit RGB brackets, the common
 case) are compiled into the disk cache first, once (:func:`hdrio.jit.fill_cache`), where
-each worker used to compile them all itself. Nothing but a fork server imports this
-module."""
+each worker used to compile them all itself. A fork server imports this module, and so
+can a Dask worker you start yourself: ``dask worker SCHEDULER --preload
+hdrio.batch.worker_start`` (docs/farm.md)."""
 
 from __future__ import annotations
 
