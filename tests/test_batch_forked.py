@@ -99,3 +99,33 @@ def test_the_command_on_a_local_cluster_writes_what_the_serial_run_writes(
     assert len(a) == 4 and a.keys() == b.keys()
     for name in a:  # same code on the same files: bit for bit
         np.testing.assert_array_equal(a[name], b[name])
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A set's work that takes a while and leaves a file named after the set."""
+
+    folder: Path
+
+    def __call__(self, task: SetTask) -> tuple[bool, str]:
+        import time
+
+        time.sleep(0.3)
+        (self.folder / f"{task.index}.done").touch()
+        return True, ""
+
+
+def test_an_interrupted_pool_drops_the_sets_not_started(tmp_path):
+    """Ctrl-C during ``--group``: the pool stops after the sets it is running (a
+    worker's queue may hold one more), instead of going on through every set of the
+    shoot while the command had already said 'interrupted' (as it did)."""
+    tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
+                     status="run") for k in range(1, 13)]
+
+    def interrupt(result, done, total):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_local(tasks, Mark(tmp_path), workers=2, on_result=interrupt)
+    assert 1 <= len(list(tmp_path.glob("*.done"))) <= 6
+    assert _server_pid() is None

@@ -149,15 +149,23 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
                 on_result(results[-1], len(results), len(tasks))
         return results
     share = worker_threads(workers)
-    with fork_server(share, WORKER_START, work_module(work)) as forked, ProcessPoolExecutor(
+    with fork_server(share, WORKER_START, work_module(work)) as forked:
+        pool = ProcessPoolExecutor(
             max_workers=workers, mp_context=multiprocessing.get_context(
                 "forkserver" if forked else "spawn"), initializer=_start_worker,
-            initargs=(os.getpid(), share, forked)) as pool:
-        futures = [pool.submit(run_set, work, task) for task in tasks]
-        for future in as_completed(futures):
-            results.append(future.result())
-            if on_result is not None:
-                on_result(results[-1], len(results), len(tasks))
+            initargs=(os.getpid(), share, forked))
+        try:
+            futures = [pool.submit(run_set, work, task) for task in tasks]
+            for future in as_completed(futures):
+                results.append(future.result())
+                if on_result is not None:
+                    on_result(results[-1], len(results), len(tasks))
+        finally:
+            # Interrupted (Ctrl-C) or failed: the sets not started are dropped and the
+            # running ones finish (or stop, when the workers were interrupted too).
+            # Without cancel_futures, Ctrl-C said "interrupted" and the pool went on
+            # through every set of the shoot.
+            pool.shutdown(wait=True, cancel_futures=True)
     return results
 
 
