@@ -129,3 +129,41 @@ def test_an_interrupted_pool_drops_the_sets_not_started(tmp_path):
         run_local(tasks, Mark(tmp_path), workers=2, on_result=interrupt)
     assert 1 <= len(list(tmp_path.glob("*.done"))) <= 6
     assert _server_pid() is None
+
+
+@dataclass(frozen=True)
+class Dies:
+    """A set's work whose worker dies (as the kernel's OOM killer ends it) at set
+    ``index``: the first time only, or every time."""
+
+    folder: Path
+    index: int
+    every_time: bool = False
+
+    def __call__(self, task: SetTask) -> tuple[bool, str]:
+        import signal
+        import time
+
+        marker = self.folder / "died"
+        if task.index == self.index and (self.every_time or not marker.exists()):
+            marker.touch()
+            os.kill(os.getpid(), signal.SIGKILL)
+        time.sleep(0.1)
+        return True, ""
+
+
+@pytest.mark.parametrize("every_time", [False, True])
+def test_a_pool_worker_that_dies_loses_no_other_set(tmp_path, every_time):
+    """A worker killed mid-set broke the whole pool: every set not finished failed with
+    'internal error (BrokenProcessPool ...)' and the command stopped. Now the sets lost
+    with it run again in a new pool; a set that kills its worker every time fails alone,
+    saying so, and the others are done."""
+    from hdrio.batch.pool import LOST
+
+    tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
+                     status="run") for k in range(1, 9)]
+    results = run_local(tasks, Dies(tmp_path, 3, every_time), workers=2)
+    assert sorted(r.index for r in results) == list(range(1, 9))
+    failed = {r.index: r.printed for r in results if not r.ok}
+    assert failed == ({3: LOST} if every_time else {})
+    assert _server_pid() is None

@@ -30,6 +30,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 from hdrio.batch.journal import record_done
@@ -136,7 +137,9 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
     in this process).
 
     ``on_result(result, done, total)`` is called in this process as each set finishes.
-    Results are returned in the order the sets finished.
+    Results are returned in the order the sets finished. A worker that dies (killed, out
+    of memory) loses no other set: the sets it took down with the pool run again in a
+    new one (:data:`LOST`).
     """
     if not tasks:
         return []
@@ -150,23 +153,61 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
         return results
     share = worker_threads(workers)
     with fork_server(share, WORKER_START, work_module(work)) as forked:
-        pool = ProcessPoolExecutor(
-            max_workers=workers, mp_context=multiprocessing.get_context(
-                "forkserver" if forked else "spawn"), initializer=_start_worker,
-            initargs=(os.getpid(), share, forked))
-        try:
-            futures = [pool.submit(run_set, work, task) for task in tasks]
-            for future in as_completed(futures):
-                results.append(future.result())
-                if on_result is not None:
-                    on_result(results[-1], len(results), len(tasks))
-        finally:
-            # Interrupted (Ctrl-C) or failed: the sets not started are dropped and the
-            # running ones finish (or stop, when the workers were interrupted too).
-            # Without cancel_futures, Ctrl-C said "interrupted" and the pool went on
-            # through every set of the shoot.
-            pool.shutdown(wait=True, cancel_futures=True)
+        context = multiprocessing.get_context("forkserver" if forked else "spawn")
+        start = (os.getpid(), share, forked)
+        left = list(tasks)
+        while left:  # a worker died: what its pool had not finished, in a new pool
+            done = len(results)
+            left = _pool_round(left, work, workers, context, start, results, on_result,
+                               len(tasks))
+            if left and len(results) == done:  # none finished: a set kills its worker
+                for task in left:  # find it: a set a pool, one after another
+                    if _pool_round([task], work, 1, context, start, results, on_result,
+                                   len(tasks)):
+                        results.append(SetResult(task.index, False, LOST,
+                                                 socket.gethostname(), 0, 0.0, float("nan")))
+                        if on_result is not None:
+                            on_result(results[-1], len(results), len(tasks))
+                left = []
     return results
+
+
+LOST = ("error: its worker died while running it (killed, or out of memory?), also "
+        "when it ran alone; a rerun of the command tries it again\n")
+"""What a set says whose worker died under it even when it ran in a pool of its own.
+When a pool worker dies, the pool breaks and every set it had not finished is lost with
+it: those run again in a new pool, round after round while a round finishes some; when
+one finishes none, each set left runs in a pool of its own, and those that kill it
+again fail with this."""
+
+
+def _pool_round(tasks: list[SetTask], work: Work, workers: int,
+                context: multiprocessing.context.BaseContext, start: tuple,
+                results: list[SetResult], on_result: OnResult | None, total: int
+                ) -> list[SetTask]:
+    """Run ``tasks`` in a new pool, appending each finished set's result to ``results``
+    (and telling ``on_result``); return the sets lost with a worker that died."""
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=context,
+                               initializer=_start_worker, initargs=start)
+    lost = []
+    try:
+        futures = {pool.submit(run_set, work, task): task for task in tasks}
+        for future in as_completed(futures):
+            try:
+                result = future.result()
+            except BrokenProcessPool:
+                lost.append(futures[future])
+                continue
+            results.append(result)
+            if on_result is not None:
+                on_result(result, len(results), total)
+    finally:
+        # Interrupted (Ctrl-C) or failed: the sets not started are dropped and the
+        # running ones finish (or stop, when the workers were interrupted too).
+        # Without cancel_futures, Ctrl-C said "interrupted" and the pool went on
+        # through every set of the shoot.
+        pool.shutdown(wait=True, cancel_futures=True)
+    return sorted(lost, key=lambda task: task.index)
 
 
 def forks_workers() -> bool:
