@@ -167,3 +167,16 @@ def test_a_pool_worker_that_dies_loses_no_other_set(tmp_path, every_time):
     failed = {r.index: r.printed for r in results if not r.ok}
     assert failed == ({3: LOST} if every_time else {})
     assert _server_pid() is None
+
+
+def test_a_fork_server_that_cannot_start_leaves_spawned_workers(tmp_path, monkeypatch):
+    def refuse():
+        raise OSError("no socket here")
+
+    monkeypatch.setattr(multiprocessing.forkserver._forkserver, "ensure_running", refuse)
+    tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
+                     status="run") for k in range(1, 3)]
+    before = dict(os.environ)
+    results = run_local(tasks, Report(os.getpid()), workers=2)
+    assert all(r.ok and r.printed.startswith("False") for r in results)  # spawned
+    assert dict(os.environ) == before and _server_pid() is None

@@ -254,9 +254,16 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
     os.environ.update(added)
     try:
         server.ensure_running()
+        started = True
+    except OSError:  # no socket or process for it here: spawned workers, as elsewhere
+        started = False
     finally:
         for name in added:
             del os.environ[name]
+    if not started:
+        forkserver.set_forkserver_preload(preload)
+        yield False
+        return
     try:
         yield True
     finally:

@@ -23,8 +23,11 @@ MODULES = ("hdrio.batch.pool", "hdrio.job.run", "hdrio.job.stages",
 """What a set of ``--group --merge`` imports (measured: the modules a worker had after its
 first set that it did not have at start)."""
 
+# Nothing here may stop the server: what fails here, a worker meets again (and reports)
+# in its set.
 for _module in MODULES:
-    with contextlib.suppress(ImportError):
+    with contextlib.suppress(Exception):
         importlib.import_module(_module)
 prepare_numba()
-fill_cache()
+with contextlib.suppress(Exception):
+    fill_cache()
