@@ -37,7 +37,6 @@ import json
 import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -47,7 +46,13 @@ import numpy as np
 
 from benchmarks import farm
 from benchmarks.speed.endtoend import write_jpegs
-from benchmarks.speed.process import demo_rows, floor_command, hdrio_command, timed
+from benchmarks.speed.process import (
+    baseline_environment,
+    demo_rows,
+    floor_command,
+    hdrio_command,
+    timed,
+)
 from benchmarks.speed.scene import bracket_stack
 from hdrio.io.images import read_image
 
@@ -112,14 +117,8 @@ def merge_rows(paths: list[str], exposures: list[str], folder: Path, cores: list
                                         folder / "floor.exr"), env),
                 "merge": ([*hdrio_command(), *arguments], env)}
     if baseline is not None:
-        path = os.pathsep.join([str(baseline.resolve()), os.environ.get("PYTHONPATH", "")])
         commands["baseline"] = ([sys.executable, "-m", "hdrio", *arguments],
-                                {**env, "PYTHONPATH": path.rstrip(os.pathsep)})
-        found = subprocess.run([sys.executable, "-c", "import hdrio; print(hdrio.__file__)"],
-                               capture_output=True, text=True, cwd=folder, check=True,
-                               env={**os.environ, **commands["baseline"][1]}).stdout.strip()
-        if not Path(found).resolve().is_relative_to(baseline.resolve()):
-            raise SystemExit(f"--baseline {baseline}: python -m hdrio runs {found}")
+                                {**env, **baseline_environment(baseline, folder)})
     rows = []
     for count in cores:
         runs: dict[str, list[dict]] = {name: [] for name in commands}
@@ -280,7 +279,8 @@ def main(argv: list[str] | None = None) -> int:
         workers = ",".join(str(v) for v in counts(args.workers))
         dask = ",".join(str(v) for v in counts(args.dask)) if args.dask else "none"
         farm.main(["--sets", str(args.sets), "--size", args.shoot_size, "--workers", workers,
-                   "--dask", dask, "--no-pinned", "--json", str(args.out / "farm.json")])
+                   "--dask", dask, "--no-pinned", "--json", str(args.out / "farm.json"),
+                   *(["--baseline", str(args.baseline)] if args.baseline else [])])
     print(f"wrote {args.out / 'cores.json'} ({time.perf_counter() - started:.0f} s in all)")
     return 0
 

@@ -15,7 +15,11 @@ the ``hdrio`` command as a user runs it, one fresh process per row:
   --workers 1,4,16 --dask 16``);
 * ``--dask local:N``: a Dask ``LocalCluster`` of as many (each N of ``--dask``; by
   default every N of ``--workers``);
-* ``hdrio merge`` of one set: the single-run memory budget.
+* ``hdrio merge`` of one set: the single-run memory budget;
+* with ``--baseline TREE`` (a folder holding another commit's ``hdrio/``), every row but
+  the single set again right after it, by that tree's ``hdrio`` (started in the
+  temporary folder, writing to folders of its own), and each row's throughput against
+  the baseline's: a change to how sets run, measured against its parent in one run.
 
 Throughput is sets per minute of the whole command (start-up included), with the CPU
 time of the command's processes (user + system) and the cores that makes on average; a
@@ -40,7 +44,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from benchmarks.speed.endtoend import write_jpegs
-from benchmarks.speed.process import timed
+from benchmarks.speed.process import baseline_environment, timed
 from benchmarks.speed.scene import bracket_stack
 
 DEFAULT_OUT = Path(__file__).parent / "results"
@@ -64,17 +68,45 @@ def make_shoot(folder: Path, sets: int, frames: int, height: int, width: int) ->
     return shoot
 
 
-def measure(command: list[str], cores: int = 0) -> dict:
-    """Run ``command`` in a fresh process (on the first ``cores`` CPUs when given); wall
-    seconds, CPU seconds, the largest process's peak (MB), per-set worker peaks, the load
-    average before and after."""
+def measure(command: list[str], cores: int = 0, env: dict[str, str] | None = None,
+            cwd: Path | None = None) -> dict:
+    """Run ``command`` in a fresh process (on the first ``cores`` CPUs when given; with
+    ``env`` added, in ``cwd``); wall seconds, CPU seconds, the largest process's peak
+    (MB), per-set worker peaks, the load average before and after."""
     load_before = os.getloadavg()[0]
-    result = timed(command, cores=cores)
+    result = timed(command, env, cores=cores, cwd=cwd)
     peaks = [int(p) for p in _PEAK.findall(result["output"])]
     return {"seconds": result["seconds"], "process_peak_mb": result["peak_mb"],
             "cpu_seconds": result["cpu_seconds"],
             "worker_peak_mb": max(peaks) if peaks else None,
             "load_before": load_before, "load_after": os.getloadavg()[0]}
+
+
+BASELINE = " (baseline)"
+"""Appended to a row's name when the ``--baseline`` tree's ``hdrio`` ran it."""
+
+
+def _elsewhere(command: list[str], folder: Path) -> list[str]:
+    """``command`` writing its output (``-o``, a path under ``folder``) under
+    ``folder/baseline`` instead (the same folders would be found done, recorded in the
+    journal)."""
+    at = command.index("-o") + 1
+    output = folder / "baseline" / Path(command[at]).relative_to(folder)
+    return [*command[:at], str(output), *command[at + 1:]]
+
+
+def _row(name: str, sets: int, measured: dict) -> dict:
+    """A row of the table, printed as it is made."""
+    row = {"run": name, "sets": sets, **measured}
+    row["sets_per_minute"] = 60 * sets / row["seconds"]
+    row["cpu_seconds_per_set"] = row["cpu_seconds"] / sets
+    print(f"{name:48s} {row['seconds']:7.1f} s  {row['sets_per_minute']:6.2f} sets/min"
+          f"  CPU {row['cpu_seconds']:6.1f} s ({row['cpu_seconds'] / row['seconds']:.2f}"
+          f" cores, {row['cpu_seconds_per_set']:.2f} s a set)"
+          f"  process peak {row['process_peak_mb']:6.0f} MB  worker peak "
+          f"{row['worker_peak_mb'] or float('nan'):6.0f} MB  load "
+          f"{row['load_before']:.1f} -> {row['load_after']:.1f}", flush=True)
+    return row
 
 
 def runs(hdrio: list[str], folder: Path, shoot: Path, sets: int, workers: list[int],
@@ -133,6 +165,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-pinned", dest="pinned", action="store_false",
                         help="leave out the row of one worker pinned to one core")
     parser.add_argument("--json", type=Path, default=DEFAULT_OUT / "farm.json")
+    parser.add_argument("--baseline", type=Path, default=None, metavar="TREE",
+                        help="a folder holding another commit's hdrio/ package: each "
+                             "row but the single set runs again right after with it")
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.size.split("x"))
     workers = [int(v) for v in args.workers.split(",")]
@@ -143,20 +178,22 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="hdrio-farm-") as folder:
         folder = Path(folder)
         shoot = make_shoot(folder, args.sets, args.frames, height, width)
-        for name, sets, cores, command in runs(hdrio, folder, shoot, args.sets, workers,
-                                               dask, args.pinned):
-            row = {"run": name, "sets": sets, **measure(command, cores)}
-            row["sets_per_minute"] = 60 * sets / row["seconds"]
-            row["cpu_seconds_per_set"] = row["cpu_seconds"] / sets
-            rows.append(row)
-            print(f"{name:48s} {row['seconds']:7.1f} s  {row['sets_per_minute']:6.2f} sets/min"
-                  f"  CPU {row['cpu_seconds']:6.1f} s ({row['cpu_seconds'] / row['seconds']:.2f}"
-                  f" cores, {row['cpu_seconds_per_set']:.2f} s a set)"
-                  f"  process peak {row['process_peak_mb']:6.0f} MB  worker peak "
-                  f"{row['worker_peak_mb'] or float('nan'):6.0f} MB  load "
-                  f"{row['load_before']:.1f} -> {row['load_after']:.1f}", flush=True)
+        baseline = (None if args.baseline is None
+                    else baseline_environment(args.baseline, folder))
+        planned = runs(hdrio, folder, shoot, args.sets, workers, dask, args.pinned)
+        if baseline is not None:  # its kernels into its cache before the timed rows
+            timed(_elsewhere(planned[0][3], folder), baseline, cwd=folder)
+        for name, sets, cores, command in planned:
+            rows.append(_row(name, sets, measure(command, cores)))
+            if baseline is not None and sets > 1:  # alternated, in the same minutes
+                rows.append(_row(f"{name}{BASELINE}", sets,
+                                 measure(_elsewhere(command, folder), cores, baseline, folder)))
     by_name = {row["run"]: row for row in rows}
     found = ratios(by_name, workers)
+    for name in (name for name in by_name if f"{name}{BASELINE}" in by_name):
+        found[f"{name}: this / the baseline (sets/min)"] = (
+            by_name[name]["sets_per_minute"]
+            / by_name[f"{name}{BASELINE}"]["sets_per_minute"])
     for name, ratio in found.items():
         print(f"throughput {name}: {ratio:.2f}x")
     document = {"cpus": os.cpu_count(), "sets": args.sets, "frames": args.frames,

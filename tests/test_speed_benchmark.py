@@ -123,3 +123,7 @@ def test_the_many_core_run_measures_the_merge_its_floor_and_a_shoot(tmp_path):
                              if row["section"] == "scaling")["stages"]
     shoot = json.loads((tmp_path / "farm.json").read_text())
     assert "pool 2 / 1 workers" in shoot["throughput_ratios"]
+    # and the baseline's shoot, row by row after this one's (not the single set)
+    assert shoot["throughput_ratios"][
+        "--group, local pool of 2 (--threads 2): this / the baseline (sets/min)"] > 0
+    assert sum(row["run"].endswith(" (baseline)") for row in shoot["rows"]) == 2

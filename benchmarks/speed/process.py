@@ -99,6 +99,21 @@ def timed(argv: list[str], env: dict[str, str] | None = None, cores: int = 0,
     return result
 
 
+def baseline_environment(tree: Path, cwd: Path) -> dict[str, str]:
+    """The environment in which ``python -m hdrio``, started in ``cwd`` (not a checkout:
+    ``python -m`` puts the working directory first on ``sys.path``), runs the ``hdrio``
+    package of ``tree`` (a folder holding another commit's ``hdrio/``: ``git archive
+    COMMIT hdrio | tar -x -C TREE``); refuses (SystemExit) when it would run another."""
+    path = os.pathsep.join([str(tree.resolve()), os.environ.get("PYTHONPATH", "")])
+    env = {"PYTHONPATH": path.rstrip(os.pathsep)}
+    found = subprocess.run([sys.executable, "-c", "import hdrio; print(hdrio.__file__)"],
+                           capture_output=True, text=True, cwd=cwd, check=True,
+                           env={**os.environ, **env}).stdout.strip()
+    if not Path(found).resolve().is_relative_to(tree.resolve()):
+        raise SystemExit(f"--baseline {tree}: python -m hdrio runs {found}")
+    return env
+
+
 def _median(argv: list[str], repeats: int, env: dict[str, str] | None = None) -> dict:
     runs = [timed(argv, env) for _ in range(repeats)]
     return {"seconds": statistics.median(r["seconds"] for r in runs),
