@@ -25,7 +25,7 @@ import importlib
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 INNER = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 """numba options of a kernel's helper that only other kernels call (``@njit(...,
@@ -207,19 +207,28 @@ stacks. (The job's own compile-ahead has no response stage: the job needs its ke
 before a helper could have imported numba.)"""
 
 
-def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED) -> list[str]:
+FILL_VARIABLE = "HDRIO_FILL"
+"""Stages a batch's fork server compiles besides :data:`FILLED` (comma-separated
+:mod:`hdrio.tools.precompile` names, e.g. ``preview=reinhard-global`` when the chain
+tone-maps): set in the server's environment only (:func:`hdrio.batch.pool.fork_server`)."""
+
+
+def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED,
+               extra: Sequence[str] = ()) -> list[str]:
     """Compile the stages (keys of :data:`STAGES`) of ``groups`` whose kernels are not
     cached, into the disk cache, a process a group (:mod:`hdrio.tools.precompile`), all
     at once; return once they are done, with the stages compiled. What a batch's fork
     server does before it forks the workers, and a Dask worker started with ``--preload
     hdrio.batch.worker_start``: each worker then loads the kernels instead of compiling
-    them all again. This process compiles nothing and starts no thread.
+    them all again. This process compiles nothing and starts no thread. ``extra``
+    stages join the first group.
 
     Processes of one user on one machine take turns (a lock file in the temporary
     folder, where ``fcntl`` has locks): eight workers started at once on a fresh node
     compile once, and the other seven find the kernels cached."""
+    groups = ((*groups[0], *extra), *groups[1:]) if extra else groups
     with _machine_lock("fill-cache"):
-        todo = [[stage for stage in group if not is_stage_cached(stage)]
+        todo = [[stage for stage in group if not is_stage_cached(stage.partition("=")[0])]
                 for group in groups]
         processes = [subprocess.Popen(
             [sys.executable, "-m", "hdrio.tools.precompile", *group],

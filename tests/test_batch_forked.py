@@ -180,3 +180,42 @@ def test_a_fork_server_that_cannot_start_leaves_spawned_workers(tmp_path, monkey
     results = run_local(tasks, Report(os.getpid()), workers=2)
     assert all(r.ok and r.printed.startswith("False") for r in results)  # spawned
     assert dict(os.environ) == before and _server_pid() is None
+
+
+@dataclass(frozen=True)
+class Fill:
+    """A set's work that says what its fork server was asked to compile."""
+
+    def __call__(self, task: SetTask) -> tuple[bool, str]:
+        from hdrio.jit import FILL_VARIABLE
+
+        return True, os.environ.get(FILL_VARIABLE, "")
+
+
+def test_the_fork_server_compiles_what_the_chain_needs_besides(tmp_path, monkeypatch):
+    """A chain that tone-maps has its preview's kernels compiled by the fork server on a
+    first run too (its environment says which); the command's own environment is left
+    as it was."""
+    from hdrio import jit
+
+    tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
+                     status="run") for k in range(1, 3)]
+    before = dict(os.environ)
+    results = run_local(tasks, Fill(), workers=2, fill=("preview=reinhard-global",))
+    assert {r.printed for r in results} == {"preview=reinhard-global"}
+    assert dict(os.environ) == before
+    started = []
+
+    class Process:
+        def __init__(self, command, **_):
+            started.append(command[command.index("hdrio.tools.precompile") + 1:])
+
+        def wait(self):
+            return 0
+
+    monkeypatch.setattr(jit.subprocess, "Popen", Process)
+    monkeypatch.setattr(jit, "is_stage_cached", lambda stage: False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    assert jit.fill_cache(extra=["preview=reinhard-local"]) == [
+        *jit.FILLED[0], "preview=reinhard-local", *jit.FILLED[1]]
+    assert started == [[*jit.FILLED[0], "preview=reinhard-local"], [*jit.FILLED[1]]]

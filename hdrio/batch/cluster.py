@@ -75,11 +75,13 @@ def local_cluster(workers: int | None = None) -> Any:
 
 
 @contextlib.contextmanager
-def forked_workers(workers: int | None = None, work: Work | None = None) -> Iterator[None]:
+def forked_workers(workers: int | None = None, work: Work | None = None,
+                   fill: Sequence[str] = ()) -> Iterator[None]:
     """Inside, the workers of a :func:`local_cluster` of ``workers`` are forked from a
     fork server that has imported ``distributed``, what a set needs and the module of
     ``work`` (:func:`hdrio.batch.pool.fork_server`): a worker then starts without
-    importing them itself. A worker the nanny restarts is forked too. Leave it after the
+    importing them itself (and ``fill``: :func:`hdrio.batch.pool.run_local`). A worker
+    the nanny restarts is forked too. Leave it after the
     cluster is closed. Elsewhere than Linux, spawned workers as before."""
     import dask
 
@@ -88,7 +90,7 @@ def forked_workers(workers: int | None = None, work: Work | None = None) -> Iter
     _distributed()
     share = worker_threads(workers or threads())
     modules = ["distributed", WORKER_START] + ([work_module(work)] if work else [])
-    with fork_server(share, *modules) as forked, dask.config.set(
+    with fork_server(share, *modules, fill=fill) as forked, dask.config.set(
             {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}):
         yield
 

@@ -132,14 +132,16 @@ def _start_worker(parent_pid: int, threads: int, forked: bool = False) -> None:
 
 
 def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
-              on_result: OnResult | None = None) -> list[SetResult]:
+              on_result: OnResult | None = None, fill: Sequence[str] = ()
+              ) -> list[SetResult]:
     """Run ``tasks`` in a pool of ``workers`` processes on this machine (one: serially,
     in this process).
 
     ``on_result(result, done, total)`` is called in this process as each set finishes.
     Results are returned in the order the sets finished. A worker that dies (killed, out
     of memory) loses no other set: the sets it took down with the pool run again in a
-    new one (:data:`LOST`).
+    new one (:data:`LOST`). ``fill``: stages the fork server compiles on a first run
+    besides the common ones (:data:`hdrio.jit.FILL_VARIABLE`).
     """
     if not tasks:
         return []
@@ -152,7 +154,7 @@ def run_local(tasks: Sequence[SetTask], work: Work, workers: int,
                 on_result(results[-1], len(results), len(tasks))
         return results
     share = worker_threads(workers)
-    with fork_server(share, WORKER_START, work_module(work)) as forked:
+    with fork_server(share, WORKER_START, work_module(work), fill=fill) as forked:
         context = multiprocessing.get_context("forkserver" if forked else "spawn")
         start = (os.getpid(), share, forked)
         left = list(tasks)
@@ -229,7 +231,7 @@ def work_module(work: Work) -> str:
 
 
 @contextlib.contextmanager
-def fork_server(threads: int, *modules: str) -> Iterator[bool]:
+def fork_server(threads: int, *modules: str, fill: Sequence[str] = ()) -> Iterator[bool]:
     """A fork server of this process's own for worker processes of ``threads`` threads
     each, with ``modules`` imported before it forks any: True inside when it runs (start
     the workers with the ``forkserver`` context), False where workers must be spawned.
@@ -237,7 +239,8 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
     On Linux only, and only when this process runs no fork server yet (one started with
     another share of threads would hand its workers the wrong sizes). It starts with the
     workers' environment (:func:`hdrio.parallel.worker_environment`, the user's own
-    values standing), which numba, OpenMP and glibc read when they load, and is stopped
+    values standing), which numba, OpenMP and glibc read when they load (and ``fill``,
+    stages to compile on a first run: :data:`hdrio.jit.FILL_VARIABLE`), and is stopped
     and waited for on leaving, after its workers are gone. Not this process itself
     forked: OpenImageIO and numba keep thread pools that a fork would copy mid-flight;
     the server has started none."""
@@ -249,7 +252,10 @@ def fork_server(threads: int, *modules: str) -> Iterator[bool]:
         return
     preload = list(getattr(server, "_preload_modules", ["__main__"]))
     forkserver.set_forkserver_preload(list(modules))
-    added = {name: value for name, value in worker_environment(threads).items()
+    from hdrio.jit import FILL_VARIABLE
+
+    server_environment = {**worker_environment(threads), FILL_VARIABLE: ",".join(fill)}
+    added = {name: value for name, value in server_environment.items()
              if name not in os.environ}  # the user's own values stand
     os.environ.update(added)
     try:

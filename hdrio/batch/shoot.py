@@ -22,8 +22,8 @@ from hdrio.job.options import MergeOptions
 
 
 def run_sets(tasks: Sequence[SetTask], work: Work, *, client: Any = None,
-             workers: int | None = None, on_result: OnResult | None = None
-             ) -> list[SetResult]:
+             workers: int | None = None, on_result: OnResult | None = None,
+             fill: Sequence[str] = ()) -> list[SetResult]:
     """Run the tasks whose status is ``run``: first remove the stale temporary files of
     killed writers in their output folders (:mod:`hdrio.batch.partial`) and make the
     folders, then run on ``client``'s Dask cluster when given, else in a local pool of
@@ -38,7 +38,7 @@ def run_sets(tasks: Sequence[SetTask], work: Work, *, client: Any = None,
         from hdrio.batch.cluster import run_dask
 
         return run_dask(todo, work, client, on_result)
-    return run_local(todo, work, workers or threads(), on_result)
+    return run_local(todo, work, workers or threads(), on_result, fill)
 
 
 @dataclass(frozen=True)

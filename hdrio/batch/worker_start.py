@@ -5,7 +5,8 @@ module of the set's work (the chain's, for ``--group``). Each worker forked from
 server has them already; spawned, each paid for them itself. On a first run the kernels
 of the merge and of alignment's and deghosting's tests (8-bit RGB brackets, the common
 case) are compiled into the disk cache first, once (:func:`hdrio.jit.fill_cache`), where
-each worker used to compile them all itself. A fork server imports this module, and so
+each worker used to compile them all itself, and the preview's when the chain tone-maps
+(:data:`hdrio.jit.FILL_VARIABLE`). A fork server imports this module, and so
 can a Dask worker you start yourself: ``dask worker SCHEDULER --preload
 hdrio.batch.worker_start`` (docs/farm.md)."""
 
@@ -13,8 +14,9 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import os
 
-from hdrio.jit import fill_cache, prepare_numba
+from hdrio.jit import FILL_VARIABLE, fill_cache, prepare_numba
 
 MODULES = ("hdrio.batch.pool", "hdrio.job.run", "hdrio.job.stages",
            "hdrio.align.motion", "hdrio.align.deghost", "hdrio.merge.masked",
@@ -30,4 +32,5 @@ for _module in MODULES:
         importlib.import_module(_module)
 prepare_numba()
 with contextlib.suppress(Exception):
-    fill_cache()
+    fill_cache(extra=[stage for stage in os.environ.get(FILL_VARIABLE, "").split(",")
+                      if stage])

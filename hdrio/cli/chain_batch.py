@@ -211,7 +211,7 @@ def _compiles_first(settings: dict[str, Any], sets: int) -> bool:
 
 
 @contextlib.contextmanager
-def _client(address: str, work):
+def _client(address: str, work, fill: tuple[str, ...]):
     """The ``distributed.Client`` of ``--dask``, closed on leaving (and a local cluster
     with it, its workers forked: :func:`hdrio.batch.cluster.forked_workers`)."""
     from hdrio.batch.cluster import LOCAL, forked_workers, local_cluster, parse_address
@@ -222,7 +222,7 @@ def _client(address: str, work):
         raise ChainError("--dask needs Dask: pip install 'hdrio[farm]'") from None
     where, workers = parse_address(address)
     if where == LOCAL:
-        with forked_workers(workers, work), local_cluster(workers) as cluster, \
+        with forked_workers(workers, work, fill), local_cluster(workers) as cluster, \
                 Client(cluster) as client:
             yield client
         return
@@ -284,10 +284,12 @@ def run_groups(chain: Chain, _values: list[str], rest: list[Step],
     if _compiles_first(chain.settings, len(todo)):
         chain.say("compiling kernels (first run only), once before the workers start; "
                   "later runs load them from the cache")
-    with (_client(chain.settings["dask"], work) if chain.settings.get("dask")
+    # what the workers' fork server compiles on a first run besides the merge's
+    fill = tuple(f"preview={step.value[0]}" for step in rest if step.name == "--tonemap")
+    with (_client(chain.settings["dask"], work, fill) if chain.settings.get("dask")
           else contextlib.nullcontext()) as client:
         results = run_sets(tasks, work, client=client, workers=chain.settings.get("threads"),
-                           on_result=report)
+                           on_result=report, fill=fill)
     failed = sorted(result.index for result in results if not result.ok)
     if failed:
         raise ChainError(f"{len(failed)} of {len(todo)} sets failed (sets "
