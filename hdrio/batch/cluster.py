@@ -81,8 +81,8 @@ def forked_workers(workers: int | None = None, work: Work | None = None,
     fork server that has imported ``distributed``, what a set needs and the module of
     ``work`` (:func:`hdrio.batch.pool.fork_server`): a worker then starts without
     importing them itself (and ``fill``: :func:`hdrio.batch.pool.run_local`). A worker
-    the nanny restarts is forked too. Leave it after the
-    cluster is closed. Elsewhere than Linux, spawned workers as before."""
+    the nanny restarts is forked too. Leave it after the cluster is closed. Elsewhere
+    than Linux, spawned workers as before."""
     import dask
 
     from hdrio.parallel import threads

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from hdrio.batch.journal import record_done
 from hdrio.batch.partial import clean_partials
 from hdrio.batch.tasks import SetTask
+from hdrio.jit import FILL_VARIABLE
 from hdrio.parallel import die_with_parent, limit_heap_arenas, worker_environment
 
 Work = Callable[[SetTask], tuple[bool, str]]
@@ -252,8 +253,6 @@ def fork_server(threads: int, *modules: str, fill: Sequence[str] = ()) -> Iterat
         return
     preload = list(getattr(server, "_preload_modules", ["__main__"]))
     forkserver.set_forkserver_preload(list(modules))
-    from hdrio.jit import FILL_VARIABLE
-
     server_environment = {**worker_environment(threads), FILL_VARIABLE: ",".join(fill)}
     added = {name: value for name, value in server_environment.items()
              if name not in os.environ}  # the user's own values stand
