@@ -213,9 +213,9 @@ FILL_VARIABLE = "HDRIO_FILL"
 tone-maps): set in the server's environment only (:func:`hdrio.batch.pool.fork_server`)."""
 
 
-def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED,
-               extra: Sequence[str] = ()) -> list[str]:
-    """Compile the stages (keys of :data:`STAGES`) of ``groups`` whose kernels are not
+def fill_cache(extra: Sequence[str] = ()) -> list[str]:
+    """Compile the stages of :data:`FILLED` (``NAME`` or ``NAME=VALUE`` of
+    :mod:`hdrio.tools.precompile`, ``NAME`` a key of :data:`STAGES`) whose kernels are not
     cached, into the disk cache, a process a group (:mod:`hdrio.tools.precompile`), all
     at once; return once they are done, with the stages compiled. What a batch's fork
     server does before it forks the workers, and a Dask worker started with ``--preload
@@ -226,7 +226,7 @@ def fill_cache(groups: tuple[tuple[str, ...], ...] = FILLED,
     Processes of one user on one machine take turns (a lock file in the temporary
     folder, where ``fcntl`` has locks): eight workers started at once on a fresh node
     compile once, and the other seven find the kernels cached."""
-    groups = ((*groups[0], *extra), *groups[1:]) if extra else groups
+    groups = ((*FILLED[0], *extra), *FILLED[1:])
     with _machine_lock("fill-cache"):
         todo = [[stage for stage in group if not is_stage_cached(stage.partition("=")[0])]
                 for group in groups]
@@ -259,12 +259,9 @@ def _machine_lock(name: str) -> Iterator[None]:
     except OSError:
         yield
         return
-    with handle:
+    with handle:  # closing it gives the lock back
         fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+        yield
 
 
 def _started_or_cached(stage: str) -> bool:

@@ -144,10 +144,8 @@ def die_with_parent(parent_pid: int, forked: bool = False) -> None:
         if not forked:
             return os.getppid() == parent_pid
         try:
-            os.kill(parent_pid, 0)  # signal 0: is there such a process
-        except ProcessLookupError:
-            return False
-        except PermissionError:  # there is, another user's: the id was reused
+            os.kill(parent_pid, 0)  # signal 0: is there such a process (of this user)
+        except OSError:  # none, or another user's: the id was reused
             return False
         return True
 
