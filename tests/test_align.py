@@ -210,6 +210,26 @@ def test_homography_model_recovers_a_shift(truth_scene):
             assert corner_motion(error, H, W) < 0.7
 
 
+def test_pairs_measured_at_once_give_the_transforms_of_one_thread(monkeypatch):
+    """:func:`estimate_alignment` measures every bracket's pair with its inward neighbour
+    at once, on every thread, and measures again a bracket beyond one that could not be
+    registered (hdrio/align/registration.py): on a hand-held ladder with refused
+    brackets, the transforms and what was refused are exactly those of one thread."""
+    from hdrio.response import RESPONSE_METHODS
+    from tests.hard_cases import hand_held
+
+    stack = hand_held(7, 0).stack()
+    response = RESPONSE_METHODS["Debevec1997"](stack)
+    found = {}
+    for count in ("1", "2", "4"):
+        monkeypatch.setenv("HDRIO_THREADS", count)
+        found[count] = estimate_alignment(stack, response)
+    assert found["1"].refused  # the re-measured pair is exercised
+    for count in ("2", "4"):
+        assert np.array_equal(found[count].transforms, found["1"].transforms)
+        assert found[count].refused == found["1"].refused
+
+
 def test_align_stack_leaves_the_callers_stack_alone(truth_scene):
     moving, _, _ = _moving(truth_scene, 2)
     before = moving.codes.copy()
@@ -620,6 +640,64 @@ def test_deghosting_staged_brackets_in_bands_flags_the_same_cells(truth_scene):
     banded = deghost(staged, tables, variance, 1, resampled=False)
     assert in_memory.fraction > 0  # the object is found
     np.testing.assert_array_equal(banded.keep, in_memory.keep)
+
+
+@pytest.mark.parametrize("shape, code_max", [((4, 61, 83, 3), 255), ((3, 40, 37, 3), 65535),
+                                             ((2, 30, 20, 1), 1023), ((3, 9, 11, 4), 255),
+                                             ((2, 1, 1, 3), 255), ((5, 50, 300, 3), 255)])
+def test_the_motion_kernels_give_their_numpy_definitions_bit_for_bit(shape, code_max):
+    """:func:`hdrio.align.motion.falling_pixels` and :func:`hdrio.align.resolve.sharp_edges`
+    are numba kernels (the NumPy and SciPy passes took 1.7 s of a hand-held 7 x 24 MP
+    merge): on random codes, with sparse falls and edges near the borders, 8 to 16 bits,
+    one to four channels, every ``step``, the masks are exactly those of their
+    definitions (:func:`falling` grown by ``maximum_filter`` of a cell each way; the
+    3x3 range of the channels' float32 mean, as ``mean(axis=-1, dtype=float32)``
+    and SciPy's filters make it). Exact: a mask differs or it does not."""
+    import scipy.ndimage
+
+    from hdrio.align.deghost import CELL
+    from hdrio.align.motion import falling, falling_pixels
+    from hdrio.align.resolve import EDGE_CODES, sharp_edges
+
+    rng = np.random.default_rng(sum(shape) + code_max)
+    dtype = np.uint8 if code_max <= 255 else np.uint16
+    count, height, width, channels = shape
+    # A ramp with noise of a few per cent and steps of random height: edges and flat
+    # ground, brighter bracket by bracket.
+    scene = (np.linspace(0.0, 0.3, width)[None, :, None]
+             + 0.03 * rng.random((height, width, channels))
+             + 0.4 * (rng.random((height // 7 + 1, width // 7 + 1, 1)) > 0.7).repeat(
+                 7, 0).repeat(7, 1)[:height, :width])
+    gains = 2.0 ** np.arange(count)[:, None, None, None] / 2 ** (count // 2)
+    codes = np.clip(np.rint(scene[None] * gains * code_max), 0, code_max).astype(dtype)
+    # A few pixels whose codes fall with exposure, by more than the margin and by about
+    # it.
+    for _ in range(5):
+        y, x, c = rng.integers(height), rng.integers(width), rng.integers(channels)
+        codes[-1, y, x, c] = max(0, int(codes[0, y, x, c]) - rng.integers(0, code_max // 8 + 2))
+    grown = scipy.ndimage.maximum_filter(falling(codes, code_max).astype(np.uint8),
+                                         size=2 * CELL + 1, mode="constant") > 0
+    assert np.array_equal(falling_pixels(codes, code_max), grown)
+    for step in (1, 2, 3):
+        bracket = codes[count // 2]
+        grey = bracket[::step, ::step].mean(axis=-1, dtype=np.float32)
+        spread = scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)
+        edges = spread > EDGE_CODES * code_max / 255.0
+        edges = np.repeat(np.repeat(edges, step, 0), step, 1)[:height, :width]
+        assert 0 < np.count_nonzero(edges) < edges.size or height * width < 100
+        assert np.array_equal(sharp_edges(bracket, code_max, step), edges), step
+    # Spreads at the threshold and a third of a code either side (the mean of three
+    # channels), where float32's rounding decides.
+    flat = np.full((5, 3 * 11, channels), 100, np.int64)
+    for i, extra in enumerate(range(-5, 6)):
+        flat[2, 3 * i + 1] += round(EDGE_CODES * code_max / 255.0) + extra * np.eye(
+            channels, dtype=np.int64)[0] * max(1, code_max // 255)
+    flat = flat.astype(dtype)
+    grey = flat.mean(axis=-1, dtype=np.float32)
+    edges = (scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)
+             > EDGE_CODES * code_max / 255.0)
+    assert 0 < np.count_nonzero(edges) < edges.size
+    assert np.array_equal(sharp_edges(flat, code_max), edges)
 
 
 def test_codes_that_fall_with_exposure_are_found_and_grown_by_a_cell():

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from hdrio.align.deghost import (
     CELL,
@@ -30,6 +31,7 @@ from hdrio.align.resolve import sharp_edges
 from hdrio.align.warp import coverage, seen_elsewhere
 from hdrio.errors import HdrioError
 from hdrio.io.staging import gather_pixels
+from hdrio.parallel import on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.noise_fit import fit_noise
@@ -141,22 +143,82 @@ GROWN = 1.1
 it dropped."""
 
 
-FALLING_BAND = 256
-"""Rows of every bracket :func:`falling_pixels` reads at a time (its scratch for a
-24 MP stack's full height, two int16 copies of a bracket and a mask, would be 0.36 GB)."""
-
-
 def falling_pixels(codes: np.ndarray, code_max: int) -> np.ndarray:
     """``(H, W)``: the pixels whose codes fall with exposure (:func:`falling`), grown by
-    a cell (a mover's edge blurs into its neighbours); read :data:`FALLING_BAND` rows at
-    a time."""
-    import scipy.ndimage
+    a cell (a mover's edge blurs into its neighbours); rows shared among the threads,
+    every bracket's codes of a pixel read together (NumPy's pass per bracket, on one
+    thread in bands of rows, took 0.7 s at 7 x 24 MP)."""
+    height, width = codes.shape[1:3]
+    fell = np.zeros((height, width), np.uint8)
+    on_threads(_falling_rows, height, codes, int(round(FALLING * code_max)), fell)
+    across = np.empty_like(fell)
+    on_threads(_grow_across, height, fell, CELL, across)
+    del fell
+    grown = np.empty((height, width), np.bool_)
+    on_threads(_grow_down, height, across, CELL, grown)
+    return grown
 
-    height = codes.shape[1]
-    out = np.zeros(codes.shape[1:3], np.uint8)
-    for top in range(0, height, FALLING_BAND):
-        out[top:top + FALLING_BAND] = falling(codes[:, top:top + FALLING_BAND], code_max)
-    return scipy.ndimage.maximum_filter(out, size=2 * CELL + 1, mode="constant") > 0
+
+@njit(cache=True, nogil=True)
+def _grow_across(start, stop, mask, radius, out):  # pragma: no cover - compiled
+    """Rows ``start .. stop - 1``: 1 where ``mask`` has a 1 within ``radius`` columns (a
+    running count over the window)."""
+    width = mask.shape[1]
+    for y in range(start, stop):
+        count = 0
+        for x in range(min(radius, width)):
+            count += mask[y, x]
+        for x in range(width):
+            if x + radius < width:
+                count += mask[y, x + radius]
+            if x - radius - 1 >= 0:
+                count -= mask[y, x - radius - 1]
+            out[y, x] = count > 0
+
+
+@njit(cache=True, nogil=True)
+def _grow_down(start, stop, across, radius, out):  # pragma: no cover - compiled
+    """Rows ``start .. stop - 1``: ``across`` (:func:`_grow_across`) grown by ``radius``
+    rows: with it, ``scipy.ndimage.maximum_filter(mask, 2 radius + 1, mode="constant")``
+    (0.19 s at 24 MP on one thread)."""
+    height, width = across.shape
+    for y in range(start, stop):
+        for x in range(width):
+            out[y, x] = False
+        for yy in range(max(0, y - radius), min(height, y + radius + 1)):
+            for x in range(width):
+                out[y, x] |= across[yy, x] != 0
+
+
+@njit(cache=True, nogil=True)
+def _falling_rows(start, stop, codes, margin, out):  # pragma: no cover - compiled
+    """Rows ``start .. stop - 1`` of :func:`falling` for every pixel of ``codes``
+    ``(P, H, W, C)``, into ``out`` (1 where some channel falls)."""
+    count, _, width, channels = codes.shape
+    highest = np.empty(channels, np.int64)
+    for y in range(start, stop):
+        for x in range(width):
+            fell = False
+            if channels == 3:  # spelt out, the running maxima in registers: 3x faster
+                h0 = np.int64(codes[0, y, x, 0])
+                h1 = np.int64(codes[0, y, x, 1])
+                h2 = np.int64(codes[0, y, x, 2])
+                for j in range(1, count):
+                    z0 = np.int64(codes[j, y, x, 0])
+                    z1 = np.int64(codes[j, y, x, 1])
+                    z2 = np.int64(codes[j, y, x, 2])
+                    fell |= (z0 < h0 - margin) | (z1 < h1 - margin) | (z2 < h2 - margin)
+                    h0, h1, h2 = max(h0, z0), max(h1, z1), max(h2, z2)
+                out[y, x] = fell
+                continue
+            for c in range(channels):
+                highest[c] = codes[0, y, x, c]
+            for j in range(1, count):
+                for c in range(channels):
+                    z = np.int64(codes[j, y, x, c])
+                    fell |= z < highest[c] - margin
+                    highest[c] = max(highest[c], z)
+            out[y, x] = fell
 
 
 def _pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:

@@ -15,8 +15,10 @@ resamples the brackets that moved. ``--align`` chooses:
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -40,6 +42,7 @@ from hdrio.align.resolve import sampled_stack
 from hdrio.align.ward2003 import align_Ward2003
 from hdrio.align.warp import warp_codes
 from hdrio.errors import HdrioError
+from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.tables import estimate_tables
 from hdrio.skips import well_exposed_codes
@@ -195,6 +198,42 @@ def _pyramid(base: BaseImage, levels: int) -> list[tuple[np.ndarray, np.ndarray]
     return [(scipy.ndimage.gaussian_filter(image, SMOOTHING), valid) for image, valid in out]
 
 
+class _Pyramids:
+    """The brackets' pyramids (:func:`_pyramid`), each built when a pair first needs it
+    and dropped after the last pair :meth:`expect` counted for it (a bracket's pyramid is
+    read by its pairs with both neighbours, on different threads): at 24 MP, building all
+    seven first held 30 MB more at the peak. A pyramid asked for again later is built
+    again."""
+
+    def __init__(self, bases: list[BaseImage], levels: int) -> None:
+        self._bases, self._levels = bases, levels
+        self._lock = threading.Lock()
+        self._built: dict[int, list] = {}  # bracket -> [its lock, its pyramid or None]
+        self._uses: dict[int, int] = {}
+
+    def expect(self, pairs: list[tuple[int, int]]) -> None:
+        """Count the pairs that will read each pyramid."""
+        for pair in pairs:
+            for j in pair:
+                self._uses[j] = self._uses.get(j, 0) + 1
+
+    @contextlib.contextmanager
+    def held(self, j: int) -> Iterator[list[tuple[np.ndarray, np.ndarray]]]:
+        """Bracket ``j``'s pyramid, built by the first to ask; given back at the end."""
+        with self._lock:
+            entry = self._built.setdefault(j, [threading.Lock(), None])
+        with entry[0]:
+            if entry[1] is None:
+                entry[1] = _pyramid(self._bases[j], self._levels)
+        try:
+            yield entry[1]
+        finally:
+            with self._lock:
+                self._uses[j] = self._uses.get(j, 0) - 1
+                if self._uses[j] <= 0 and self._built.get(j) is entry:
+                    del self._built[j]
+
+
 def linear_tables(response: CameraResponse, exposures: np.ndarray) -> np.ndarray:
     """``(P, C, levels)`` float64: ``f^-1(z) / dt_j``, relative radiance per code."""
     return np.ascontiguousarray(
@@ -219,32 +258,41 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
     reference = (reference_bracket(stack.codes, stack.code_max) if start is None
                  else start.reference)
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape)) if start is None else 0
-    pyramids = {reference: _pyramid(bases[reference], levels)}
     transforms = np.repeat(np.eye(3)[None], count, axis=0)  # base pixels, then full
     refused = dict(start.refused) if start is not None else {}
+    pyramids = _Pyramids(bases, levels)
+
+    def pair(k: int, j: int) -> tuple[np.ndarray, str | None]:
+        why = unusable(bases[k].valid, bases[j].valid)
+        if why is not None:
+            return np.eye(3), why
+        with pyramids.held(k) as pyramid_k, pyramids.held(j) as pyramid_j:
+            return _register_pair(pyramid_k, pyramid_j, bases[k], bases[j],
+                                  None if start is None else rescale(
+                                      start.transforms[j]
+                                      @ np.linalg.inv(start.transforms[k]), 1.0 / factor),
+                                  model, stack.code_max)
+
     # Each bracket is aligned to its nearest registered neighbour towards the reference
-    # (the pair shares the most well-exposed pixels), and the warps composed.
+    # (the pair shares the most well-exposed pixels), and the warps composed. Every
+    # bracket's pair with its next neighbour inwards is measured at once, on every
+    # thread (NumPy and SciPy release the GIL for most of a pair's work); a bracket
+    # beyond one that could not be registered is measured again against the last one
+    # that was.
+    inwards = [(j + 1 if j < reference else j - 1, j) for j in range(count)
+               if j != reference and j not in refused]
+    pyramids.expect(inwards)
+    measured = dict(zip(inwards, map_on_threads(lambda kj: pair(*kj), inwards)))
     for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
         k = reference
         for j in side:
             if j in refused:
                 continue
-            why = unusable(bases[k].valid, bases[j].valid)
-            if why is None:
-                pyramids[j] = _pyramid(bases[j], levels)
-                step, why = _register_pair(pyramids[k], pyramids[j], bases[k], bases[j],
-                                           None if start is None else rescale(
-                                               start.transforms[j]
-                                               @ np.linalg.inv(start.transforms[k]),
-                                               1.0 / factor),
-                                           model, stack.code_max)
+            step, why = measured[(k, j)] if (k, j) in measured else pair(k, j)
             if why is not None:  # left unwarped; the next bracket out pairs with k
                 refused[j] = why
-                pyramids.pop(j, None)
                 continue
             transforms[j] = step @ transforms[k]
-            if k != reference:
-                pyramids.pop(k)  # no longer needed: keep two or three pyramids at most
             k = j
     motion = [0.0] * count
     for j in range(count):

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 
 from hdrio.align.warp import coverage, warp_codes
 from hdrio.stack import ExposureStack
@@ -60,11 +61,36 @@ def sharp_edges(codes: np.ndarray, code_max: int, step: int = 1) -> np.ndarray:
     than :data:`EDGE_CODES` (mean of channels). With ``step`` > 1 the test is made on
     every ``step``-th pixel each way (neighbourhoods ``step`` times wider: more pixels
     excluded, ``step^2`` times less work) and each result repeated over its block."""
-    import scipy.ndimage
     height, width = codes.shape[:2]
-    grey = codes[::step, ::step].mean(axis=-1, dtype=np.float32)
-    spread = scipy.ndimage.maximum_filter(grey, 3) - scipy.ndimage.minimum_filter(grey, 3)
-    edges = spread > EDGE_CODES * code_max / 255.0
+    edges = np.empty((-(-height // step), -(-width // step)), np.bool_)
+    _sharp_edges(codes, step, np.float32(EDGE_CODES * code_max / 255.0), edges)
     if step > 1:
         edges = np.repeat(np.repeat(edges, step, axis=0), step, axis=1)[:height, :width]
     return edges
+
+
+@njit(cache=True, nogil=True)
+def _sharp_edges(codes, step, threshold, out):  # pragma: no cover - compiled
+    """:func:`sharp_edges` on the ``step`` grid, into ``out``: the mean of the channels
+    as NumPy's ``mean(axis=-1, dtype=float32)`` makes it (a float32 sum, divided in
+    float64), its 3x3 range (the border's neighbours the border itself, as
+    ``scipy.ndimage``'s filters reflect it) and the comparison in float32, so that the
+    mask is NumPy's bit for bit, in one pass and without SciPy's filters (14 calls took
+    1 s of a hand-held 7 x 24 MP merge)."""
+    rows, cols = out.shape
+    channels = codes.shape[2]
+    grey = np.empty((rows, cols), np.float32)
+    for y in range(rows):
+        for x in range(cols):
+            total = np.float32(0.0)
+            for c in range(channels):
+                total += np.float32(codes[y * step, x * step, c])
+            grey[y, x] = np.float32(np.float64(total) / channels)
+    for y in range(rows):
+        for x in range(cols):
+            low = high = grey[y, x]
+            for yy in range(max(y - 1, 0), min(y + 2, rows)):
+                for xx in range(max(x - 1, 0), min(x + 2, cols)):
+                    low = min(low, grey[yy, xx])
+                    high = max(high, grey[yy, xx])
+            out[y, x] = high - low > threshold
