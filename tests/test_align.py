@@ -230,6 +230,28 @@ def test_pairs_measured_at_once_give_the_transforms_of_one_thread(monkeypatch):
         assert found[count].refused == found["1"].refused
 
 
+def test_the_resolved_responses_samples_are_pixels_of_the_whole_image(truth_scene,
+                                                                       monkeypatch):
+    """After a warp the response is re-solved on every ``step``-th pixel of the reference's
+    grid (:func:`hdrio.align.resolve.sampled_stack`); what reads its samples again (the
+    falling codes that decide deghosting's re-solve, the response plot) reads them in the
+    full, warped stack. They are that grid's pixels there: spread over the whole image,
+    on multiples of the step. Before, they were read as full-image pixels as they were, a
+    strip at the top (on a 24 MP stack, rows 12-242 of 4000). The crop is registered on
+    a base of half its size here, as a stack above 1.6 MP is (``BASE_PIXELS``)."""
+    import hdrio.align.registration as registration
+
+    moving, _, _ = _moving(truth_scene, 0)
+    monkeypatch.setattr(registration, "base_factor", lambda height, width: 2)
+    result = merge_stack(moving, AUTO)
+    assert result.motion.warped
+    indices = np.asarray(result.response.parameters["sample_indices"])
+    rows, cols = indices // W, indices % W
+    assert indices.max() < H * W
+    assert np.all(rows % 2 == 0) and np.all(cols % 2 == 0)
+    assert rows.max() > H // 2 and cols.max() > W // 2
+
+
 def test_align_stack_leaves_the_callers_stack_alone(truth_scene):
     moving, _, _ = _moving(truth_scene, 2)
     before = moving.codes.copy()

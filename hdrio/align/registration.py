@@ -437,4 +437,21 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
         response = solve(small, uncovered)
     except HdrioError:  # too little left to solve from: keep the first response
         return alignment, response
+    response = on_full_grid(response, small.shape[1], stack.shape[1], step)
     return estimate_alignment(stack, response, model, start=alignment), response
+
+
+def on_full_grid(response: CameraResponse, small_width: int, width: int,
+                 step: int) -> CameraResponse:
+    """``response`` with its ``sample_indices`` (flat pixels of the ``step`` grid it was
+    solved on, ``small_width`` wide) made flat pixels of the full ``width``-wide image in
+    the reference's frame, where the warped stack has them: what reads the samples
+    again (:func:`hdrio.align.motion.falling_fraction`, the response plot) reads those
+    pixels. (They were read as full-image pixels as they were: on a 24 MP stack, a strip
+    of the top 250 rows.)"""
+    indices = response.parameters.get("sample_indices")
+    if indices is None or step == 1:
+        return response
+    indices = np.asarray(indices)
+    full = (indices // small_width) * step * width + (indices % small_width) * step
+    return replace(response, parameters={**response.parameters, "sample_indices": full})
