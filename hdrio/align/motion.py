@@ -199,7 +199,7 @@ def _falling_rows(start, stop, codes, margin, out):  # pragma: no cover - compil
     for y in range(start, stop):
         for x in range(width):
             fell = False
-            if channels == 3:  # spelt out, the running maxima in registers: 3x faster
+            if channels == 3:  # spelt out, the running maxima in registers: 2.5x faster
                 h0 = np.int64(codes[0, y, x, 0])
                 h1 = np.int64(codes[0, y, x, 1])
                 h2 = np.int64(codes[0, y, x, 2])
