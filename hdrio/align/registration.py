@@ -202,7 +202,7 @@ class _Pyramids:
     """The brackets' pyramids (:func:`_pyramid`), each built when a pair first needs it
     and dropped after the last pair :meth:`expect` counted for it (a bracket's pyramid is
     read by its pairs with both neighbours, on different threads): at 24 MP, building all
-    seven first held 30 MB more at the peak. A pyramid asked for again later is built
+    seven first held 16-36 MB more at the peak. A pyramid asked for again later is built
     again."""
 
     def __init__(self, bases: list[BaseImage], levels: int) -> None:
