@@ -28,7 +28,7 @@ from hdrio.align.registration import (
     register,
 )
 from hdrio.align.resolve import sharp_edges
-from hdrio.align.warp import coverage, seen_elsewhere
+from hdrio.align.warp import clipped_elsewhere, coverage, seen_elsewhere
 from hdrio.errors import HdrioError
 from hdrio.io.staging import gather_pixels
 from hdrio.parallel import on_threads
@@ -302,13 +302,19 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
         motion.uncovered = float(np.mean(cells.min(axis=0) < 1))
         refused = [j for j, _ in motion.alignment.refused]
         if refused:  # never merged unwarped where a registered bracket sees the scene
-            seen = seen_elsewhere(stack.codes, stack.code_max,
-                                  [j for j in range(count) if j not in refused], CELL)
+            registered = [j for j in range(count) if j not in refused]
+            seen = seen_elsewhere(stack.codes, stack.code_max, registered, CELL)
+            # ... but where it alone sees a highlight every registered bracket clipped,
+            # it is: a sun that only the darkest frame reads (through an ND filter, or
+            # the shortest of a ladder, too dark to register) was a neutral lower bound,
+            # 390x too dark.
+            only = {j: clipped_elsewhere(stack.codes, stack.code_max, registered, j, CELL)
+                    for j in refused}
             for j in refused:
-                cells[j] *= ~seen
-            motion.unregistered = ~seen & np.any(
+                cells[j] *= ~seen | only[j]
+            motion.unregistered = (~seen & np.any(
                 [seen_elsewhere(stack.codes, stack.code_max, [j], CELL) for j in refused],
-                axis=0)
+                axis=0)) | np.any(list(only.values()), axis=0)
     if deghost_mode == "off":
         motion.keep = cells
         return response

@@ -270,6 +270,23 @@ def coverage(warp: np.ndarray, height: int, width: int, factor: int,
     return cells.astype(np.float32)
 
 
+def clipped_elsewhere(codes: np.ndarray, code_max: int, others, j: int,
+                      cell: int) -> np.ndarray:
+    """``(rows, cols)`` cells of ``cell`` pixels holding a pixel that every bracket of
+    ``others`` has clipped (some channel at ``code_max``) and bracket ``j`` sees with
+    every channel below it: a highlight that only ``j`` shows (a sun that only the
+    darkest frame through an ND filter reads). :func:`seen_elsewhere` is decided on half
+    of a cell, and a sun's core is a few pixels of it."""
+    count, height, width, channels = codes.shape
+    rows, cols = -(-height // cell), -(-width // cell)
+    only = np.all(codes[j] < code_max, axis=-1)
+    for k in others:
+        only &= np.any(codes[k] >= code_max, axis=-1)
+    padded = np.zeros((rows * cell, cols * cell), bool)
+    padded[:height, :width] = only
+    return padded.reshape(rows, cell, cols, cell).any(axis=(1, 3))
+
+
 def seen_elsewhere(codes: np.ndarray, code_max: int, others, cell: int) -> np.ndarray:
     """``(rows, cols)`` cells of ``cell`` pixels where some bracket of ``others`` has
     every channel strictly between 0 and ``code_max`` at half of the cell's pixels or

@@ -32,7 +32,7 @@ from hdrio.merge.ladder import (
     needs_inference,
     starting_response,
 )
-from hdrio.merge.nd import NDReport, filter_gains, nd_stops, unfiltered, with_nd
+from hdrio.merge.nd import NDReport, filter_gains, nd_stops, stops_of, unfiltered, with_nd
 from hdrio.merge.saturation import (
     ClipPolicy,
     SolveFilter,
@@ -137,8 +137,9 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress,
     extra = {"solve_identical_once": "channels" in plan.skips} if method != "linear" else {}
 
     def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
-        if filtered is not None and np.count_nonzero(filtered == 0) >= 2:
-            stack = unfiltered(stack, filtered)  # a filter's cast would bend g
+        stops = None if filtered is None else stops_of(stack, prepared.stack, filtered)
+        if stops is not None and np.count_nonzero(stops == 0) >= 2:
+            stack = unfiltered(stack, stops)  # a filter's cast would bend g
 
         def solved_with(dropped: SolveFilter | None = None) -> CameraResponse:
             return RESPONSE_METHODS[method](

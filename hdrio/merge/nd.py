@@ -78,6 +78,18 @@ def with_nd(stack: ExposureStack, stops: np.ndarray) -> tuple[ExposureStack, np.
     return sorted_stack, stops[order]
 
 
+def stops_of(stack: ExposureStack, named: ExposureStack, stops: np.ndarray
+             ) -> np.ndarray:
+    """``stops`` (per bracket of ``named``) for the brackets of ``stack``, which may be
+    some of them: alignment's re-solve samples the registered brackets alone (a dark
+    bracket through the filter is often refused). Matched by file name; by position when
+    the names do not tell (``stack`` then has ``named``'s brackets)."""
+    by_name = dict(zip(named.files, stops))
+    if len(by_name) == len(stops) and all(name in by_name for name in stack.files):
+        return np.array([by_name[name] for name in stack.files])
+    return stops
+
+
 def unfiltered(stack: ExposureStack, stops: np.ndarray) -> ExposureStack:
     """The brackets shot without a filter (for the response solve)."""
     keep = np.flatnonzero(stops == 0)
