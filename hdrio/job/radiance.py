@@ -131,7 +131,8 @@ def remerge_motion(stack: ExposureStack, response: CameraResponse, merged: Merge
         observation_variance(response, stack.exposures, noise), allowed)
     remerge_resampled(stack.codes, tables, remerge, merged.radiance, reference=reference,
                       cell=CELL, cells=motion.keep, limits=statistics.limits,
-                      code_max=stack.code_max, weights=terms.imag)
+                      code_max=stack.code_max, weights=terms.imag,
+                      warped=np.array(motion.alignment.motion) > 0)
 
 
 def remerge_stage(stack: ExposureStack, merged_stack: ExposureStack,
