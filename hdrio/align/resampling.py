@@ -255,10 +255,10 @@ def disagreement_scale(codes: np.ndarray, reference: np.ndarray, estimates: np.n
 def remerge_resampled(codes: np.ndarray, tables: ResamplingTables, remerge,
                       radiance: np.ndarray, *, reference: int, cell: int,
                       cells: np.ndarray | None, limits, code_max: int,
-                      weights: np.ndarray, warped: np.ndarray | None = None) -> None:
+                      weights: np.ndarray, warped: np.ndarray) -> None:
     """Re-merge ``radiance`` ``(H, W, C)`` in bands of cell rows with every bracket's keep
-    weight on ``cells`` (or 1) times, for each ``warped`` bracket (``(P,)`` bool; by
-    default every one but the ``reference``), its :func:`cell_factors` in the cells where
+    weight on ``cells`` (or 1) times, for each ``warped`` bracket (``(P,)`` bool: never
+    the ``reference``), its :func:`cell_factors` in the cells where
     it can carry :data:`hdrio.align.shares.SHARE` of the merge's ``weights`` (``(P, C,
     levels)``, :func:`hdrio.align.shares.weighty_cells`). A bracket that was not warped
     (it did not move, or it could not be registered) was not resampled: its steep
@@ -291,8 +291,7 @@ def remerge_resampled(codes: np.ndarray, tables: ResamplingTables, remerge,
         bottom = min(rows, top + band)
         todo = weighty_cells(codes, cell, top, bottom, kept[:, top:bottom], ranges, limits,
                              share=shares.SHARE, spread=int(SPREAD * code_max))
-        if warped is not None:
-            todo &= np.asarray(warped, bool)[:, None, None]
+        todo &= np.asarray(warped, bool)[:, None, None]
         factors = cell_factors(codes, reference, tables, limits, scales, todo, cell,
                                first=top, code_max=code_max)
         remerge(codes, cells, radiance, top * cell, min(height, bottom * cell) - top * cell,
