@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 
 import pytest
 
@@ -102,6 +103,60 @@ def test_a_second_compile_ahead_starts_nothing_already_started(monkeypatch):
     assert started == [["merge"], ["preview=reinhard-local"]]
     jit.compile_ahead("reinhard-local", merge=lambda: True)
     assert started == [["merge"], ["preview=reinhard-local"]]
+
+
+class _Helper:
+    """A compile-ahead process as :mod:`hdrio.jit` sees it: a pipe it prints stage names to."""
+
+    def __init__(self):
+        read, self.write = os.pipe()
+        self.stdout = os.fdopen(read)
+
+    def say(self, stage):
+        os.write(self.write, f"{stage}\n".encode())
+
+    def wait(self):
+        return 0
+
+    def close(self):
+        self.stdout.close()
+        os.close(self.write)
+
+
+@pytest.mark.skipif(sys.platform.startswith("win"), reason="select() takes sockets only")
+@pytest.mark.parametrize("helper_done_first", [False, True])
+def test_the_job_compiles_its_own_later_stage_while_a_helper_is_still_compiling(
+        monkeypatch, helper_done_first):
+    # On 2 CPUs the helper compiles the merge and the job the preview. A job that reaches
+    # the merge before the helper is done compiles the preview first (it waited idle for
+    # 1.5 s, then compiled the preview for 2.4 s); one that finds the helper done does not.
+    helper, compiled, said = _Helper(), [], []
+    monkeypatch.setattr(jit, "_pending", {"merge": helper})
+    monkeypatch.setattr(jit, "_finished", set())
+    monkeypatch.setattr(jit, "_own", ["preview=reinhard-global"])
+    monkeypatch.setattr(jit, "is_stage_cached",
+                        lambda stage: stage in compiled or stage in jit._finished)
+
+    def compile_here(stage):
+        compiled.append(stage.partition("=")[0])
+        helper.say("merge")  # the helper finishes meanwhile
+
+    monkeypatch.setattr(jit, "_compile_here", compile_here)
+    # Should the job wait without compiling, the helper still ends (and the test fails).
+    timer = threading.Timer(2.0, helper.say, ["merge"])
+    if helper_done_first:
+        helper.say("merge")
+    else:
+        timer.start()
+    jit.announce(said.append, "merge")
+    timer.cancel()
+    helper.close()
+    assert compiled == ([] if helper_done_first else ["preview"])
+    assert "merge" in jit._finished
+    assert jit._own == (["preview=reinhard-global"] if helper_done_first else [])
+    assert said == ([] if helper_done_first else [
+        "compiling kernels (first run only): preview, while the merge's compile ends; "
+        "later runs load them from the cache"])
 
 
 _WARM_UP = """

@@ -1,7 +1,8 @@
 """``python -m hdrio.tools.precompile STAGE ...``: compile a job's kernels into numba's disk
 cache in a process of their own, started by :func:`hdrio.jit.compile_ahead` on a first
 run. Each stage runs hdrio's own entry point on a tiny input, so the kernels compile for
-the very types the job passes them. Nothing imports this module."""
+the very types the job passes them. Only :mod:`hdrio.jit` imports this module (a job on
+two or three CPUs compiles the preview's stage here while it waits for a helper)."""
 
 from __future__ import annotations
 
@@ -64,6 +65,23 @@ def _compile_preview(operator: str) -> None:
     render_preview(np.full((8, 8, 3), 0.5, np.float32), operator)
 
 
+def compile_stage(stage: str) -> str | None:
+    """Compile one stage (``merge``, ``motion``, ``response``, ``preview=OPERATOR``) into the
+    disk cache in this process; its name, or None for anything else."""
+    name, _, value = stage.partition("=")
+    if name == "merge":
+        _compile_merge()
+    elif name == "response":
+        _compile_response()
+    elif name == "motion":
+        _compile_motion()
+    elif name == "preview":
+        _compile_preview(value)
+    else:
+        return None
+    return name
+
+
 def main(argv: Sequence[str]) -> int:
     """``python -m hdrio.tools.precompile [nice=N] merge motion response preview=OPERATOR``: compile
     those kernels in that order (at niceness ``N`` when given; and stop when the process
@@ -74,17 +92,8 @@ def main(argv: Sequence[str]) -> int:
         name, _, value = stage.partition("=")
         if name == "nice":  # the job needs this stage later than others: yield to them
             os.nice(int(value))
-        elif name == "merge":
-            _compile_merge()
-        elif name == "response":
-            _compile_response()
-        elif name == "motion":
-            _compile_motion()
-        elif name == "preview":
-            _compile_preview(value)
-        else:
-            continue
-        print(name, flush=True)  # hdrio.jit waits for this line
+        elif compile_stage(stage) is not None:
+            print(name, flush=True)  # hdrio.jit waits for this line
     return 0
 
 
