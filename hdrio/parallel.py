@@ -63,6 +63,25 @@ def worker_environment(count: int) -> dict[str, str]:
             **{name: "1" for name in BLAS_POOLS}, "MALLOC_ARENA_MAX": str(HEAP_ARENAS)}
 
 
+ROWS_OF_VALUES = 1 << 18
+"""Values a band of rows holds when a whole image goes through NumPy steps band by band
+(:func:`row_bands`: the preview's encoding and 8-bit codes, colour conversions): each
+step then makes a 1 MB temporary, which the heap hands out again, where a 24 MP image's
+288 MB temporaries were each a fresh mapping, faulted in page by page (a 24 MP preview
+took 3.0-4.4 s, 4.2-5.3 s of system CPU in the whole merge, and raised its peak from 0.56
+to 2.0 GB; docs/speed.md)."""
+
+
+def row_bands(values) -> range:
+    """Where the bands of ``values``'s first axis start, each of about
+    :data:`ROWS_OF_VALUES` values (at least one row); its ``step`` is a band's rows.
+    ``range(0, 1)`` for a scalar."""
+    if values.ndim == 0:
+        return range(0, 1)
+    step = max(1, ROWS_OF_VALUES // max(1, values[0].size))
+    return range(0, values.shape[0], step)
+
+
 def on_threads(kernel: Callable[..., None], tasks: int, *args: object) -> None:
     """``kernel(start, stop, *args)`` over tasks ``0 .. tasks - 1``, in chunks of
     consecutive tasks (eight per thread) that the threads take from a queue as they

@@ -53,6 +53,8 @@ def test_process_section_times_the_commands_users_type(tmp_path):
     assert {row.get("merge_of") for row in rows} >= {5, 7, 9}
     assert {row.get("floor_of") for row in rows} >= {5, 7, 9}
     assert any(row.get("check") for row in rows)
+    assert any(row.get("preview_of") == 7 for row in rows)  # as the README's commands
+    assert results["ratios"]["process: hdrio merge 7 JPEGs with a preview / without"] > 0
     assert {row.get("demo") for row in rows} >= {"cold", "warm"}
     # Peak memory from the OS for each process: a real Python process holds > 10 MB.
     assert all(row["process_peak_mb"] > 10 for row in rows)

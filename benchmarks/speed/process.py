@@ -124,7 +124,8 @@ def _median(argv: list[str], repeats: int, env: dict[str, str] | None = None) ->
 def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 9)
         ) -> list[dict]:
     """Rows for ``hdrio merge`` (5, 7, 9 JPEG brackets -> half EXR), the I/O floor of
-    each, ``hdrio check`` of the 7-bracket EXR, and ``hdrio demo`` cold and warm."""
+    each, the 7-bracket merge with a JPEG preview, ``hdrio check`` of the 7-bracket EXR,
+    and ``hdrio demo`` cold and warm."""
     hdrio = hdrio_command()
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="hdrio-process-") as folder:
@@ -152,6 +153,15 @@ def run(height: int, width: int, repeats: int, counts: tuple[int, ...] = (5, 7, 
             rows.append({"row": "process", "method": f"hdrio merge, {count} JPEGs -> half "
                          "EXR", "seconds": merge["seconds"], "cpu_seconds": merge["cpu_seconds"],
                          "process_peak_mb": merge["peak_mb"], "merge_of": count})
+        # The README's commands write a tone-mapped preview too (a 24 MP one took 3.0-4.4 s
+        # and doubled the peak until its NumPy steps went band by band: docs/speed.md).
+        preview = _median([*hdrio, "merge", *paths[1:8], "--exposures", ",".join(
+            exposures[1:8]), "-o", str(folder / "preview7.exr"), "--preview",
+            str(folder / "preview7.jpg"), "-q"], repeats)
+        rows.append({"row": "process", "method": "hdrio merge, 7 JPEGs -> half EXR and a "
+                     "JPEG preview", "seconds": preview["seconds"],
+                     "cpu_seconds": preview["cpu_seconds"],
+                     "process_peak_mb": preview["peak_mb"], "preview_of": 7})
         jpeg_floor = _median(floor_command(paths[1:8], "jpeg-values", folder / "floor.exr"),
                              repeats)
         rows.append({"row": "process", "method": "older floor, 7 JPEGs (writes the JPEG "
@@ -194,6 +204,12 @@ def ratios(rows: list[dict]) -> dict[str, float | None]:
             merge7["seconds"] / floor7["seconds"])
         result["process: the same in CPU seconds (user + system)"] = (
             merge7["cpu_seconds"] / floor7["cpu_seconds"])
+    previewed = pick("preview_of", 7)
+    if merge7 and previewed:
+        result["process: hdrio merge 7 JPEGs with a preview / without"] = (
+            previewed["seconds"] / merge7["seconds"])
+        result["process: the same in peak MB"] = (
+            previewed["process_peak_mb"] / merge7["process_peak_mb"])
     peaks = [row["process_peak_mb"] for row in rows if "merge_of" in row]
     if len(peaks) > 1:
         result["process: peak MB, largest / smallest over 5..9 brackets"] = (

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from hdrio.cms.spaces import display_view
+from hdrio.parallel import row_bands
 from hdrio.radiometry.luminance import DEFAULT_SPACE, log_average_luminance, luminance
 
 MID_GREY = 0.18
@@ -34,4 +35,9 @@ def preview_OCIO_display(rgb: np.ndarray, source: str, display: str, view: str, 
     exposure = key / log_average_luminance(L)
     encoded = display_view(np.asarray(rgb, dtype=np.float32) * np.float32(exposure), source,
                            display, view, config)
-    return np.clip(np.nan_to_num(encoded, nan=0.0), 0.0, 1.0)
+    bands = row_bands(encoded)
+    for top in bands:  # in place, no full-size temporary (hdrio.parallel.ROWS_OF_VALUES)
+        rows = encoded[top:top + bands.step]
+        np.nan_to_num(rows, copy=False, nan=0.0)
+        np.clip(rows, 0.0, 1.0, out=rows)
+    return encoded

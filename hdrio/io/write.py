@@ -21,7 +21,7 @@ import numpy as np
 
 from hdrio.errors import OutputError, library_message
 from hdrio.io.native import size_thread_pools
-from hdrio.parallel import read_ahead, threads
+from hdrio.parallel import read_ahead, row_bands, threads
 
 HALF_MAX = 65504.0
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
@@ -296,7 +296,12 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:
     """Write display-referred RGB in [0, 1] (already encoded) as an 8-bit image."""
-    codes = np.round(np.clip(display_rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+    values = np.asarray(display_rgb)
+    codes = np.empty(values.shape, np.uint8)
+    bands = row_bands(values)
+    for top in bands:  # no full-size temporaries: hdrio.parallel.ROWS_OF_VALUES
+        rows = values[top:top + bands.step]
+        codes[top:top + bands.step] = np.round(np.clip(rows, 0.0, 1.0) * 255.0)
     return write_image(path, codes, "uint8")
 
 
