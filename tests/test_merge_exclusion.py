@@ -76,6 +76,65 @@ def test_masked_statistics_count_the_kept_brackets_only():
     assert stats.clipped_fraction == pytest.approx(1 / 2)  # of the two pixels seen
 
 
+def test_the_exclusions_re_merge_by_bands_is_the_whole_images():
+    """Without deghosting's weights the excluded pixels are re-merged band by band of
+    rows (no (P, H, W) float32 weights: 672 MB at 7 x 24 MP); one-pixel cells share
+    nothing across rows, so every pixel is the whole image's re-merge, bit for bit, and
+    so are the statistics counted band by band. Excluded pixels in every band and at its
+    edges, some in every bracket."""
+    from hdrio.merge.exclusion import colour_exclusion, pixel_keep, remerge_excluded
+    from hdrio.merge.masked import remerge_masked
+    from hdrio.merge.weighted_mean import merge_brackets
+    from hdrio.parallel import row_bands
+    from hdrio.radiometry.tables import merge_tables
+    from hdrio.stack import ExposureStack
+    from hdrio.tools.synthetic import demo_scene, gamma_inverse_response, render_brackets
+
+    times = [1 / 64, 1 / 8, 1.0]
+    codes = render_brackets(demo_scene(700, 160, seed=5), times)
+    assert row_bands(codes[0]) == range(0, 700, 546)  # two bands
+    rng = np.random.default_rng(0)
+    for j in range(3):
+        spots = rng.integers(0, [700, 160], (400, 2))
+        codes[j, spots[:, 0], spots[:, 1]] = (0, 0, 255)
+    codes[:, 545:548, :5] = (0, 0, 255)  # across a band's edge, in every bracket
+    stack = ExposureStack.from_arrays(codes, times)
+    response = gamma_inverse_response()[0]
+    radiance, statistics = merge_brackets(stack, response, domain="linear")
+    excluded = colour_exclusion(codes, (0, 0, 255))
+    assert np.array_equal(excluded, np.all(codes == (0, 0, 255), axis=-1))
+    weights = np.ones((3, 256))
+    whole = radiance.copy()
+    terms, estimates = merge_tables(response, stack.channel_exposures, "Debevec1997",
+                                    "linear", weights)
+    remerge_masked(codes, pixel_keep(excluded, None, 1), 1, terms, estimates,
+                   statistics.policy, False, whole)
+    whole[excluded.all(axis=0)] = 0.0
+    banded = radiance.copy()
+    unseen = remerge_excluded(codes, stack.channel_exposures, response, banded, excluded,
+                              motion_keep=None, cell=1, weights=weights, domain="linear",
+                              policy=statistics.policy)
+    assert unseen.sum() == 15 and np.array_equal(banded, whole)
+    assert not np.array_equal(banded, radiance)  # the excluded pixels did change
+    counted = masked_statistics(codes, excluded, 255, statistics)
+    # The same counts over the whole image at once (the definition).
+    limits = np.asarray(statistics.limits)
+    order = [range(3), range(2, -1, -1)]
+    first = [np.full(excluded.shape[1:], -1) for _ in order]
+    for found, brackets in zip(first, order, strict=True):
+        for j in brackets:
+            found[(found < 0) & ~excluded[j]] = j
+    at = np.indices(excluded.shape[1:])
+    shortest = codes[first[0].clip(0), at[0], at[1]]
+    longest = codes[first[1].clip(0), at[0], at[1]]
+    seen = first[0] >= 0
+    assert counted.clipped_everywhere == np.count_nonzero(
+        seen & np.any(shortest >= limits, axis=-1)) > 0
+    assert counted.black_everywhere == np.count_nonzero(
+        seen & np.all(longest == 0, axis=-1))
+    assert counted.masked_everywhere == np.count_nonzero(~seen) == 15
+
+
 def test_a_masked_bracket_is_filled_from_the_others(brackets, tmp_path, capsys):
     """A block of garbage in one bracket, masked there, merges as the clean stack does;
     a corner masked in every bracket is alpha 0, in the header and the check."""

@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from hdrio.parallel import on_threads
+from hdrio.stack import every_channel, some_channel
 
 RUN_SLOPE = 0.125
 """Affine warps whose neighbourhoods drift by less than this (pixels per output pixel,
@@ -279,9 +280,10 @@ def clipped_elsewhere(codes: np.ndarray, code_max: int, others, j: int,
     of a cell, and a sun's core is a few pixels of it."""
     count, height, width, channels = codes.shape
     rows, cols = -(-height // cell), -(-width // cell)
-    only = np.all(codes[j] < code_max, axis=-1)
+    top = (code_max,) * channels
+    only = every_channel(codes[j], np.less, top)
     for k in others:
-        only &= np.any(codes[k] >= code_max, axis=-1)
+        only &= some_channel(codes[k], np.greater_equal, top)
     padded = np.zeros((rows * cell, cols * cell), bool)
     padded[:height, :width] = only
     return padded.reshape(rows, cell, cols, cell).any(axis=(1, 3))
@@ -298,7 +300,8 @@ def seen_elsewhere(codes: np.ndarray, code_max: int, others, cell: int) -> np.nd
     seen = np.zeros((rows, cols), bool)
     for j in others:
         sample = codes[j, ::2, ::2]
-        inside = np.all((sample > 0) & (sample < code_max), axis=-1).astype(np.float32)
+        inside = (every_channel(sample, np.greater, (0,) * channels)
+                  & every_channel(sample, np.less, (code_max,) * channels)).astype(np.float32)
         per = cell // 2
         padded = np.zeros((rows * per, cols * per), np.float32)
         padded[:inside.shape[0], :inside.shape[1]] = inside

@@ -41,7 +41,7 @@ from hdrio.merge.row_sums import PAIR_LEVELS, pair_tables
 from hdrio.merge.saturation import SATURATION_POLICIES, ClipPolicy, clip_policy
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.tables import merge_tables
-from hdrio.stack import ExposureStack
+from hdrio.stack import ExposureStack, some_channel
 
 
 @dataclass(frozen=True)
@@ -152,4 +152,4 @@ def clipped_everywhere_mask(shortest: np.ndarray, limits) -> np.ndarray:
     is at or above its limit (:attr:`MergeStatistics.limits`): the pixels the merge
     gave a neutral lower bound (or, with the ``channel`` policy, a channel's own)."""
     limits = np.asarray(limits, dtype=np.int64)
-    return np.any(shortest >= limits, axis=-1).astype(np.float32)
+    return some_channel(shortest, np.greater_equal, limits).astype(np.float32)
