@@ -65,7 +65,8 @@ def worker_environment(count: int) -> dict[str, str]:
 
 ROWS_OF_VALUES = 1 << 18
 """Values a band of rows holds when a whole image goes through NumPy steps band by band
-(:func:`row_bands`: the preview's encoding and 8-bit codes, colour conversions): each
+(:func:`row_bands`: the preview's encoding and 8-bit codes, colour conversions, the
+exclusions of ``--exclude-color`` and ``--mask``): each
 step then makes a 1 MB temporary, which the heap hands out again, where a 24 MP image's
 288 MB temporaries were each a fresh mapping, faulted in page by page (a 24 MP preview
 took 3.0-4.4 s, 4.2-5.3 s of system CPU in the whole merge, and raised its peak from 0.56
