@@ -78,11 +78,11 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     if result.noise is not None:
         attributes.update(result.noise.attributes())
     if result.uncertainty is not None:
-        finite = result.uncertainty[np.isfinite(result.uncertainty)]
+        finite = result.uncertainty[np.isfinite(result.uncertainty)]  # a copy
         attributes["hdrio:uncertainty"] = (
             "layer uncertainty: predicted relative standard deviation sigma/E per channel")
-        if finite.size:
-            median, p99 = np.percentile(finite, [50, 99])
+        if finite.size:  # partitioned in place: no second copy (288 MB at 24 MP)
+            median, p99 = np.percentile(finite, [50, 99], overwrite_input=True)
             attributes["hdrio:uncertaintyMedian"] = float(median)
             attributes["hdrio:uncertaintyP99"] = float(p99)
     skipped = result.skipped.lines(stack.shape[2])

@@ -51,36 +51,52 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
     channels = weights.shape[1]
     height, n = out.shape
     for y in prange(height):
-        for i in range(n):
-            x = i // channels
-            c = i % channels
-            total = 0.0
-            spread = 0.0
-            mean = 0.0
-            kept = 0
-            while kept < count:
-                row = codes[kept, y]
-                z = row[i]
-                if z >= limits[c] or (dropped_channels(
-                        row, codes[max(kept - 1, 0), y], x * channels, kept,
-                        max(kept - 1, 0), limits, gates, rule, neutral, clip_estimates,
-                        clip_variances, threshold, 1.0) >> c) & 1 == 1:
-                    break
-                w = weights[kept, c, z]
-                if w > 0.0:
-                    v = variances[kept, c, z]
-                    e = estimates[kept, c, z]
-                    total += w
-                    mean += w * e
-                    spread += w * w * (v / (e * e) if log_domain else v)
-                kept += 1
-            if total > 0.0:
-                out[y, i] = math.sqrt(spread) / total if log_domain else \
-                    math.sqrt(spread) / mean
-            else:
-                j = kept - 1 if kept > 0 else 0
-                z = codes[j, y][i]
-                out[y, i] = math.sqrt(variances[j, c, z]) / estimates[j, c, z]
+        total = np.empty(channels)
+        spread = np.empty(channels)
+        mean = np.empty(channels)
+        kept = np.empty(channels, np.int64)  # brackets used, shortest first; -1: alive
+        for x in range(n // channels):
+            base = x * channels
+            for c in range(channels):
+                total[c] = 0.0
+                spread[c] = 0.0
+                mean[c] = 0.0
+                kept[c] = -1
+            # The clip test once per pixel and bracket (it decides every channel), not
+            # once per channel: a channel stops at its first saturated or dropped code.
+            alive = channels
+            j = 0
+            while j < count and alive > 0:
+                row = codes[j, y]
+                dropped = dropped_channels(
+                    row, codes[max(j - 1, 0), y], base, j, max(j - 1, 0), limits, gates,
+                    rule, neutral, clip_estimates, clip_variances, threshold, 1.0)
+                for c in range(channels):
+                    if kept[c] >= 0:
+                        continue
+                    z = row[base + c]
+                    if z >= limits[c] or (dropped >> c) & 1 == 1:
+                        kept[c] = j
+                        alive -= 1
+                        continue
+                    w = weights[j, c, z]
+                    if w > 0.0:
+                        v = variances[j, c, z]
+                        e = estimates[j, c, z]
+                        total[c] += w
+                        mean[c] += w * e
+                        spread[c] += w * w * (v / (e * e) if log_domain else v)
+                j += 1
+            for c in range(channels):
+                i = base + c
+                if total[c] > 0.0:
+                    out[y, i] = math.sqrt(spread[c]) / total[c] if log_domain else \
+                        math.sqrt(spread[c]) / mean[c]
+                else:
+                    used = count if kept[c] < 0 else kept[c]
+                    k = used - 1 if used > 0 else 0
+                    z = codes[k, y][i]
+                    out[y, i] = math.sqrt(variances[k, c, z]) / estimates[k, c, z]
 
 
 def relative_uncertainty(stack: ExposureStack, response: CameraResponse,
