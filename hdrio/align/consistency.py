@@ -410,7 +410,8 @@ def cell_disagreement(codes: np.ndarray, tables: Tables, clip: tuple, reference:
                    todo, tallies)
         release(codes, None, 0, min(height, last * size))
     counted = np.maximum(tallies.counts, 1)
-    return (tallies.sums / counted, tallies.counts, tallies.takeovers,
-            tallies.fars / counted)
+    # The sums divided in place (P x cells float64: 21 MB at 24 MP, ten tests a merge).
+    return (np.divide(tallies.sums, counted, out=tallies.sums), tallies.counts,
+            tallies.takeovers, tallies.fars / counted)
 
 

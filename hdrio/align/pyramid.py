@@ -130,7 +130,8 @@ def base_image(codes: np.ndarray, linear: np.ndarray, code_max: int,
     low, high = well_exposed_codes(code_max, REGISTRABLE)
     on_threads(_base_rows, height, codes, np.ascontiguousarray(linear, np.float32), low, high,
                factor, out, valid, grey)
-    return BaseImage(np.log(np.maximum(out, np.float32(1e-30))), valid, grey, factor)
+    np.maximum(out, np.float32(1e-30), out=out)  # in place: no full-size temporaries
+    return BaseImage(np.log(out, out=out), valid, grey, factor)
 
 
 def downsample(image: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from hdrio.parallel import on_threads
+from hdrio.parallel import on_threads, row_bands
 from hdrio.stack import every_channel, some_channel
 
 RUN_SLOPE = 0.125
@@ -260,13 +260,16 @@ def coverage(warp: np.ndarray, height: int, width: int, factor: int,
     rows, cols = -(-height // factor), -(-width // factor)
     source_height, source_width = source or (height, width)
     ys = np.minimum(np.arange(rows + 1) * factor, height) - 0.5
-    xs = np.minimum(np.arange(cols + 1) * factor, width) - 0.5
-    x, y = np.meshgrid(xs, ys)
-    w = warp[2, 0] * x + warp[2, 1] * y + warp[2, 2]
-    sx = (warp[0, 0] * x + warp[0, 1] * y + warp[0, 2]) / w
-    sy = (warp[1, 0] * x + warp[1, 1] * y + warp[1, 2]) / w
-    inside = ((sx >= -0.5) & (sx <= source_width - 0.5) & (sy >= -0.5)
-              & (sy <= source_height - 0.5))
+    x = (np.minimum(np.arange(cols + 1) * factor, width) - 0.5)[None, :]
+    inside = np.empty((rows + 1, cols + 1), bool)
+    bands = row_bands(inside)
+    for top in bands:  # band by band of rows: no full-size float64 grids (96 MB each)
+        y = ys[top:top + bands.step, None]
+        w = warp[2, 0] * x + warp[2, 1] * y + warp[2, 2]
+        sx = (warp[0, 0] * x + warp[0, 1] * y + warp[0, 2]) / w
+        sy = (warp[1, 0] * x + warp[1, 1] * y + warp[1, 2]) / w
+        inside[top:top + bands.step] = ((sx >= -0.5) & (sx <= source_width - 0.5)
+                                        & (sy >= -0.5) & (sy <= source_height - 0.5))
     cells = inside[:-1, :-1] & inside[1:, :-1] & inside[:-1, 1:] & inside[1:, 1:]
     return cells.astype(np.float32)
 
