@@ -14,6 +14,7 @@ from hdrio.radiometry.cliptest import ClipTables
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel
 from hdrio.radiometry.noise_fit import grid_stride, noise_grid
+from hdrio.stack import every_channel, some_channel
 
 _PILE_UP = 8.0  # a white level's count is this many times its neighbours' median
 _TOP_FRACTION = 0.75  # white levels are looked for above this fraction of the code range
@@ -76,12 +77,8 @@ def _pairs(grid: np.ndarray, limits: np.ndarray):
     longer, shorter safe in every channel, longer at or above a limit in some channel)``."""
     for j in range(1, grid.shape[0]):
         short, long = grid[j - 1].astype(np.intp), grid[j].astype(np.intp)
-        # Channel by channel: np.all(..., axis=-1) over 3 channels costs 10x more.
-        safe, clipped = short[:, 0] < limits[0], long[:, 0] >= limits[0]
-        for c in range(1, grid.shape[-1]):
-            safe &= short[:, c] < limits[c]
-            clipped |= long[:, c] >= limits[c]
-        yield j, short, long, safe, clipped
+        yield (j, short, long, every_channel(short, np.less, limits),
+               some_channel(long, np.greater_equal, limits))
 
 
 def saturation_limits(codes: np.ndarray, response: CameraResponse, noise: NoiseModel,

@@ -65,7 +65,7 @@ from hdrio.radiometry.cliptest import (
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise, noise_grid
-from hdrio.stack import ExposureStack
+from hdrio.stack import ExposureStack, every_channel, some_channel
 
 SATURATION_POLICIES = ("auto", "safe", "channel", "pixel")
 
@@ -284,7 +284,7 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
     if policy == "safe" or exposures is None or codes.shape[0] < 2:
         return ClipPolicy(limits, rule="pixel", neutral=True)
     grid = sample.grid
-    clipped = np.any(grid >= limits, axis=-1)
+    clipped = some_channel(grid, np.greater_equal, limits)
     if not clipped.any():  # nothing clips: each channel dropped alone, nothing tested
         return ClipPolicy(limits)
     mixing = survey.mixing if survey is not None and survey.mixing is not None \
@@ -295,7 +295,7 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
                          CLIP_SIGMAS if neutral else APART_SIGMAS)
     chosen = ClipPolicy(limits, gates, "test", neutral, tables,
                         test_spreads(grid, tables, gates), mixing)
-    partly = clipped & ~np.all(grid >= limits, axis=-1)
+    partly = clipped & ~every_channel(grid, np.greater_equal, limits)
     partly[0] = False
     dropped = (dropped_observations(grid, chosen) == (1 << channels) - 1) & partly
     share = float(dropped.sum() / partly.sum()) if partly.any() else 0.0

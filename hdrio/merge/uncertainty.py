@@ -54,7 +54,7 @@ def _uncertainty_kernel(codes, weights, variances, estimates, policy, log_domain
         total = np.empty(channels)
         spread = np.empty(channels)
         mean = np.empty(channels)
-        kept = np.empty(channels, np.int64)  # brackets used, shortest first; -1: alive
+        kept = np.empty(channels, np.int64)  # the bracket a channel stopped at; -1: not yet
         for x in range(n // channels):
             base = x * channels
             for c in range(channels):
