@@ -116,9 +116,12 @@ class Mark:
 
 
 def test_an_interrupted_pool_drops_the_sets_not_started(tmp_path):
-    """Ctrl-C during ``--group``: the pool stops after the sets it is running (a
-    worker's queue may hold one more), instead of going on through every set of the
-    shoot while the command had already said 'interrupted' (as it did)."""
+    """Ctrl-C during ``--group``: the pool stops after the sets it is running, instead
+    of going on through every set of the shoot while the command had already said
+    'interrupted' (as it did). Interrupted at the first result, at most that set and
+    one per worker can have run: the pool is handed a set only when a worker is free
+    (when every set was queued at once, the pool's own queue started 7 of 12 on a
+    loaded CI machine)."""
     tasks = [SetTask(index=k, files=(), times_s=(), fields={}, outputs=(), fingerprint="",
                      status="run") for k in range(1, 13)]
 
@@ -127,7 +130,7 @@ def test_an_interrupted_pool_drops_the_sets_not_started(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         run_local(tasks, Mark(tmp_path), workers=2, on_result=interrupt)
-    assert 1 <= len(list(tmp_path.glob("*.done"))) <= 6
+    assert 1 <= len(list(tmp_path.glob("*.done"))) <= 1 + 2
     assert _server_pid() is None
 
 

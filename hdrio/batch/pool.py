@@ -29,7 +29,7 @@ import socket
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
@@ -192,23 +192,43 @@ def _pool_round(tasks: list[SetTask], work: Work, workers: int,
     (and telling ``on_result``); return the sets lost with a worker that died."""
     pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=context,
                                initializer=_start_worker, initargs=start)
+    waiting = list(reversed(tasks))
+    running: dict = {}
     lost = []
-    try:
-        futures = {pool.submit(run_set, work, task): task for task in tasks}
-        for future in as_completed(futures):
+
+    def start_next() -> None:
+        if waiting:
             try:
-                result = future.result()
-            except BrokenProcessPool:
-                lost.append(futures[future])
-                continue
-            results.append(result)
-            if on_result is not None:
-                on_result(result, len(results), total)
+                running[pool.submit(run_set, work, waiting[-1])] = waiting[-1]
+            except BrokenProcessPool:  # a worker died just now: its set says so next
+                return
+            waiting.pop()
+
+    try:
+        # A set is handed to the pool only when a worker is free for it, never queued
+        # ahead: on Ctrl-C (or an error in on_result) only the sets already running
+        # finish. Submitting every set at once let the pool's own queue start more
+        # after the interrupt, how many depending on timing.
+        for _ in range(workers):
+            start_next()
+        while running:
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                task = running.pop(future)
+                try:
+                    result = future.result()
+                except BrokenProcessPool:  # the pool is gone: nothing more starts in it
+                    lost.append(task)
+                    continue
+                if not lost:
+                    start_next()
+                results.append(result)
+                if on_result is not None:
+                    on_result(result, len(results), total)
+        lost.extend(waiting)
     finally:
-        # Interrupted (Ctrl-C) or failed: the sets not started are dropped and the
-        # running ones finish (or stop, when the workers were interrupted too).
-        # Without cancel_futures, Ctrl-C said "interrupted" and the pool went on
-        # through every set of the shoot.
+        # Interrupted (Ctrl-C) or failed: the running sets finish (or stop, when the
+        # workers were interrupted too); the others were never handed to the pool.
         pool.shutdown(wait=True, cancel_futures=True)
     return sorted(lost, key=lambda task: task.index)
 
