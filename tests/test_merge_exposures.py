@@ -455,3 +455,24 @@ def test_the_motion_test_reads_the_datas_exposures_only_where_the_metadatas_are_
     close = ExposureCheck(files, np.array([1.0, 1.1, 1.2, 1.3]),
                           np.array([1.0, 1.25, 1.15, 1.3]))  # within 0.5 stop, b beyond c
     assert 0.1 < close.spread() < 0.5 and close.for_the_motion_test() is None
+
+
+def test_exposures_the_data_put_out_of_order_are_an_error_naming_the_file():
+    """``--exposures-from-data`` where the brackets contradict their own order (on a
+    hand-held ladder measured before registration, the data put the second bracket 3.5
+    stops from the first): an error naming the bracket and the option, not the stack's
+    "same exposure (0.31) as b0.png (1)" for two different exposures."""
+    from hdrio.errors import InputError
+    from hdrio.merge.exposure_check import exposures_from_data
+    from hdrio.tools.synthetic import demo_scene
+
+    times = np.array([1 / 64, 1 / 16, 1 / 4, 1.0])
+    codes = render_brackets(demo_scene(120, 160), times, seed=1)
+    swapped = codes[[0, 2, 1, 3]]  # the second bracket's pixels are the third's
+    stack = ExposureStack.from_arrays(swapped, times, files=["a.png", "b.png", "c.png",
+                                                              "d.png"])
+    response = merge_stack(ExposureStack.from_arrays(codes, times)).response
+    with pytest.raises(InputError, match=r"c\.png.*--exposures-from-data: the data say"):
+        exposures_from_data(stack, response, True)
+    _, _, check = exposures_from_data(stack, response, False)  # only checked: named
+    assert check.warnings("explicit")

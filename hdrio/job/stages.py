@@ -195,10 +195,69 @@ def response_stage(prepared: Prepared, plan: MergePlan, response: CameraResponse
     elif solved is not None:
         response = solved(stack)
     if stack.count > 2 and filtered is None and exposure_check is None:
-        # two brackets cannot say which is wrong
+        # Two brackets cannot say which is wrong. Brackets to register are merged with
+        # the data's exposures only once they are (registered_exposures).
         stack, response, exposure_check = exposures_from_data(
-            stack, response, plan.options.exposures_from_data, solved)
+            stack, response, plan.options.exposures_from_data and not plan.aligns, solved)
     return replace(prepared, stack=stack), response, exposure_check
+
+
+class ExposureCalibration:
+    """Alignment's re-solve (``solve(stack, exclude)`` on its aligned sample,
+    :func:`hdrio.align.registration.register`) with ``--exposures-from-data``: the
+    exposures fitted with the response there (:func:`exposures_from_data`), where the
+    brackets compare the same scene points. ``check``: the last fit, on the registered
+    brackets only (``None`` until alignment re-solved)."""
+
+    def __init__(self, solve: Solve) -> None:
+        self.solve = solve
+        self.check: ExposureCheck | None = None
+
+    def __call__(self, small: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
+        response = self.solve(small, exclude)
+        _, response, self.check = exposures_from_data(
+            small, response, True, lambda tried: self.solve(tried, exclude),
+            exclude=exclude)
+        return response
+
+
+def registered_exposures(prepared: Prepared, response: CameraResponse, plan: MergePlan,
+                         solve: Solve | None, motion: Motion, check: ExposureCheck | None,
+                         calibration: ExposureCalibration | None = None
+                         ) -> tuple[Prepared, CameraResponse, ExposureCheck | None]:
+    """The exposures from the data (:func:`response_stage`'s check, or with
+    ``--exposures-from-data`` the ones to merge with) on the brackets as alignment left
+    them. Measured before registration, brackets that moved compare different scene
+    points: on hand-held ladders (``tests/hard_cases.py``) the check named 2-8 brackets
+    per stack, up to 4 stops off, and ``--exposures-from-data`` failed. On a warped stack
+    the brackets that could not be registered keep the metadata's exposure
+    (``unmeasured``), and the exposures merged with are those fitted with alignment's
+    re-solved response (``calibration``); on a stack left as it was the check before
+    alignment holds."""
+    if check is None or check.inferred or not plan.aligns:
+        return prepared, response, check
+    use, stack = plan.options.exposures_from_data, prepared.stack
+    if not (use or motion.warped):
+        return prepared, response, check
+    if not motion.warped:  # the same codes: as response_stage would have, had it used them
+        stack, response, check = exposures_from_data(
+            stack, response, True, None if solve is None else _solved(solve,
+                                                                       prepared.excluded))
+        return replace(prepared, stack=stack), response, check
+    unmeasured = [j for j, _ in motion.alignment.refused]
+    if not use or calibration is None or calibration.check is None:
+        # Measured on the warped brackets with the response alignment left (with
+        # exclusions, or a saved response, nothing re-solves it).
+        stack, response, check = exposures_from_data(stack, response, use,
+                                                     unmeasured=unmeasured)
+        return replace(prepared, stack=stack), response, check
+    fitted = dict(zip(calibration.check.files, calibration.check.estimated, strict=True))
+    metadata = np.asarray(stack.exposures, np.float64)
+    estimated = np.array([fitted.get(name, t) for name, t in zip(stack.files, metadata)])
+    check = ExposureCheck(tuple(stack.files), metadata, estimated, True,
+                          unmeasured=tuple(j for j, name in enumerate(stack.files)
+                                           if name not in fitted))
+    return replace(prepared, stack=replace(stack, exposures=estimated)), response, check
 
 
 def align_stage(prepared: Prepared, response: CameraResponse, plan: MergePlan,

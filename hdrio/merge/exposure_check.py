@@ -21,16 +21,17 @@ Mitsunaga, T., Nayar, S. K. (1999). Radiometric self calibration. CVPR 1999, 374
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from hdrio.errors import InputError
 from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.stack import ExposureStack
+from hdrio.stack import MIN_EXPOSURE_STEP, ExposureStack
 
 WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
@@ -54,7 +55,8 @@ PRIOR_WEIGHT = 1e-3
 
 
 def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
-                       response: CameraResponse) -> np.ndarray:
+                       response: CameraResponse, unmeasured: Sequence[int] = (),
+                       exclude: np.ndarray | None = None) -> np.ndarray:
     """Relative exposures ``(P,)`` of ``codes`` ``(P, H, W, C)`` (shortest first) from
     the data, in the units of ``exposures`` (the metadata's, which anchor the set).
 
@@ -66,14 +68,29 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
         The metadata's exposures (seconds, or any relative unit).
     response
         The camera response whose ``log_inverse`` linearises the codes.
+    unmeasured
+        Brackets whose pixels say nothing of their exposure (on a hand-held stack, those
+        that could not be registered: their pixels are not the others' scene points).
+        They keep the metadata's exposure, and neither they nor their pairs move the
+        others' estimates or the anchor.
+    exclude
+        ``(H, W)`` pixels not to compare (a warp's uncovered borders), or ``None``.
     """
     meta = np.log(np.asarray(exposures, np.float64))
-    log_t, _ = fit_log_exposures(codes, response, prior=meta)
-    return np.exp(anchor_Theil_Sen(log_t, meta))
+    log_t, _ = fit_log_exposures(codes, response, prior=meta, unmeasured=unmeasured,
+                                 exclude=exclude)
+    if not len(unmeasured):
+        return np.exp(anchor_Theil_Sen(log_t, meta))
+    measured = np.ones(meta.size, bool)
+    measured[list(unmeasured)] = False
+    found = meta.copy()
+    found[measured] = anchor_Theil_Sen(log_t[measured], meta[measured])
+    return np.exp(found)
 
 
 def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
-                      prior: np.ndarray | None = None) -> tuple[np.ndarray, list[int]]:
+                      prior: np.ndarray | None = None, unmeasured: Sequence[int] = (),
+                      exclude: np.ndarray | None = None) -> tuple[np.ndarray, list[int]]:
     """``(log_t, unlinked)``: natural-log exposures ``(P,)`` of ``codes`` (brackets in
     increasing exposure), up to a common offset (``log_t[0] = 0`` when nothing else
     fixes it), fitted by weighted least squares to the median log ratios of brackets one
@@ -83,6 +100,8 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
     ``prior``: log exposures whose neighbouring ratios tie the fit weakly (the
     metadata's; they place a bracket with no overlap). Without it, an unlinked cut
     leaves the brackets on either side unrelated (their offset is arbitrary).
+    ``unmeasured``: brackets whose pixels are not compared (only ``prior`` places
+    them); ``exclude``: ``(H, W)`` pixels not compared.
     """
     count, height, width, channels = codes.shape
     stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
@@ -92,6 +111,9 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
     columns = np.arange(channels)
     log_e = response.log_inverse[sample, columns]
     good = (sample > low) & (sample < high) & response.supported[sample, columns]
+    good[list(unmeasured)] = False
+    if exclude is not None:
+        good &= ~exclude[::stride, ::stride].reshape(1, -1, 1)
     pairs = [(j, k) for j in range(count) for k in range(j + 1, min(count, j + 3))]
 
     def measured(pair: tuple[int, int]) -> tuple[int, float]:
@@ -165,6 +187,9 @@ class ExposureCheck:
         With ``inferred``, when some brackets kept an EXIF exposure time (a set where
         only some files have metadata): those times, NaN for the others; the estimates
         are then in their units (seconds).
+    unmeasured
+        Brackets the data could not check (on a hand-held stack, those that could not be
+        registered: :func:`estimate_exposures`): their ``estimated`` is the metadata's.
     """
 
     files: tuple[str, ...]
@@ -174,6 +199,7 @@ class ExposureCheck:
     inferred: str = ""
     reference: str = ""
     exif: np.ndarray | None = None
+    unmeasured: tuple[int, ...] = ()
 
     @property
     def stops(self) -> np.ndarray:
@@ -229,15 +255,19 @@ class ExposureCheck:
         """``hdrio:exposuresMetadata``, ``hdrio:exposuresEstimated`` (decimal text, like
         ``hdrio:exposures``) and ``hdrio:exposuresFromData`` (1 when used); with no
         metadata, ``hdrio:exposuresInferred`` (how the set was anchored) and
-        ``hdrio:exposureUnits`` instead of the metadata's."""
+        ``hdrio:exposureUnits`` instead of the metadata's; ``hdrio:exposuresUnmeasured``
+        (file names) where some brackets could not be checked."""
         if self.inferred:
             return {"hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                     "hdrio:exposuresFromData": 1,
                     "hdrio:exposuresInferred": self.inferred,
                     "hdrio:exposureUnits": self.units}
+        unmeasured = {"hdrio:exposuresUnmeasured": [Path(self.files[j]).name
+                                                    for j in self.unmeasured]}
         return {"hdrio:exposuresMetadata": [f"{t:.9g}" for t in self.metadata],
                 "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
-                "hdrio:exposuresFromData": int(self.used)}
+                "hdrio:exposuresFromData": int(self.used),
+                **(unmeasured if self.unmeasured else {})}
 
     @property
     def units(self) -> str:
@@ -281,26 +311,47 @@ def _text(t: float) -> str:
 
 def exposures_from_data(stack: ExposureStack, response: CameraResponse, use: bool,
                         solve: Callable[[ExposureStack], CameraResponse] | None = None,
-                        iterations: int = 4, tolerance_stops: float = 1e-3
+                        iterations: int = 4, tolerance_stops: float = 1e-3,
+                        unmeasured: Sequence[int] = (), exclude: np.ndarray | None = None
                         ) -> tuple[ExposureStack, CameraResponse, ExposureCheck]:
     """Estimate the exposures; with ``use``, merge with them: the stack's exposures are
     replaced and the response re-solved (``solve``, when given) until the estimates
-    move less than ``tolerance_stops`` (at most ``iterations`` solves).
+    move less than ``tolerance_stops`` (at most ``iterations`` solves). ``unmeasured``:
+    brackets that keep the metadata's exposure, ``exclude`` pixels not compared
+    (:func:`estimate_exposures`).
 
     Returns the stack and response to merge with, and the check (for the warnings and
-    the header).
+    the header). Raises :class:`~hdrio.errors.InputError` when ``use`` and the data put
+    a bracket no longer than the one before it.
     """
     metadata = np.asarray(stack.exposures, np.float64)
-    estimated = estimate_exposures(stack.codes, metadata, response)
+    estimated = estimate_exposures(stack.codes, metadata, response, unmeasured, exclude)
     if use:
         for _ in range(iterations if solve is not None else 0):
-            stack = replace(stack, exposures=estimated)
+            stack = replace(stack, exposures=in_order(stack.files, estimated))
             response = solve(stack)
-            again = estimate_exposures(stack.codes, metadata, response)
+            again = estimate_exposures(stack.codes, metadata, response, unmeasured, exclude)
             moved = float(np.max(np.abs(np.log2(again / estimated))))
             estimated = again
             if moved < tolerance_stops:
                 break
-        stack = replace(stack, exposures=estimated)
-    return stack, response, ExposureCheck(tuple(stack.files), metadata, estimated, use)
+        stack = replace(stack, exposures=in_order(stack.files, estimated))
+    return stack, response, ExposureCheck(tuple(stack.files), metadata, estimated, use,
+                                          unmeasured=tuple(int(j) for j in unmeasured))
+
+
+def in_order(files: Sequence[str], estimated: np.ndarray) -> np.ndarray:
+    """``estimated``, where each bracket is longer than the one before it (as the stack
+    is sorted); else an error naming the first that is not, instead of merging with
+    exposures the brackets themselves contradict."""
+    close = estimated[1:] < estimated[:-1] * (1.0 + MIN_EXPOSURE_STEP)
+    if np.any(close):
+        j = int(np.flatnonzero(close)[0])
+        raise InputError(files[j + 1], (
+            f"--exposures-from-data: the data say its exposure is {_text(estimated[j + 1])}, "
+            f"not longer than {Path(files[j]).name}'s {_text(estimated[j])}: the brackets "
+            "do not agree on the scene (something moved, or they could not be "
+            "registered), so their exposures cannot come from the data: give them "
+            "(--exposures), or merge with the metadata's (no --exposures-from-data)"))
+    return estimated
 

@@ -41,7 +41,7 @@ from hdrio.errors import InputError
 from hdrio.io.brackets import PLACEHOLDERS
 from hdrio.io.exposure import exposure_from_exif, relative_exif_exposures
 from hdrio.io.staging import strided_copy
-from hdrio.merge.exposure_check import WARN_STOPS, ExposureCheck, exposures_from_data
+from hdrio.merge.exposure_check import WARN_STOPS, ExposureCheck, exposures_from_data, in_order
 from hdrio.merge.exposure_check import fit_log_exposures as fit
 from hdrio.radiometry.curve import CameraResponse, linear_response
 from hdrio.skips import classify
@@ -198,7 +198,7 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
                                              "cannot be inferred; give --exposures")
     known = exif_exposures(stack)
     # Self-calibration with the starting curve's scale: the ratios become consistent.
-    first = replace(stack, exposures=np.exp(log_t))
+    first = replace(stack, exposures=in_order(stack.files, np.exp(log_t)))
     _, response, check = exposures_from_data(first, start, True, solve)
     stops = np.diff(np.log2(check.estimated))
     median = float(np.median(stops))
