@@ -68,13 +68,11 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
         skipped.channels_solved = response.parameters.get("channels_solved")
     clock.lap("response")
     resolve = solve if prepared.excluded is None else None  # no re-solve under exclusions
-    calibration = (stages.ExposureCalibration(resolve) if resolve is not None
-                   and exposure_check is not None and options.exposures_from_data
-                   and not exposure_check.inferred else None)
+    calibration = stages.exposure_calibration(prepared, plan, resolve, exposure_check)
     prepared, response, motion = stages.align_stage(prepared, response, plan,
                                                     calibration or resolve, owned, say)
     prepared, response, exposure_check = stages.registered_exposures(
-        prepared, response, plan, solve, motion, exposure_check, calibration)
+        prepared, response, plan, solve, motion, exposure_check, calibration, say)
     stack, nd_report = stages.nd_stage(prepared.stack, response, prepared.filtered)
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")

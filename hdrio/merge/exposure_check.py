@@ -74,7 +74,7 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
         They keep the metadata's exposure, and neither they nor their pairs move the
         others' estimates or the anchor.
     exclude
-        ``(H, W)`` pixels not to compare (a warp's uncovered borders), or ``None``.
+        ``(H, W)`` pixels not compared (a warp's borders and sharp edges), or ``None``.
     """
     meta = np.log(np.asarray(exposures, np.float64))
     log_t, _ = fit_log_exposures(codes, response, prior=meta, unmeasured=unmeasured,
@@ -189,7 +189,12 @@ class ExposureCheck:
         are then in their units (seconds).
     unmeasured
         Brackets the data could not check (on a hand-held stack, those that could not be
-        registered: :func:`estimate_exposures`): their ``estimated`` is the metadata's.
+        registered: :func:`estimate_exposures`): their ``estimated`` is the metadata's
+        (with ``inferred``: placed by the ladder's step).
+    deferred
+        Provisional exposures (``inferred`` ``"provisional"``) to register brackets with:
+        the error their inference before registration raised, which stands unless the
+        registered brackets give them (:func:`hdrio.job.stages.registered_exposures`).
     """
 
     files: tuple[str, ...]
@@ -200,6 +205,7 @@ class ExposureCheck:
     reference: str = ""
     exif: np.ndarray | None = None
     unmeasured: tuple[int, ...] = ()
+    deferred: InputError | None = None
 
     @property
     def stops(self) -> np.ndarray:
@@ -257,13 +263,14 @@ class ExposureCheck:
         metadata, ``hdrio:exposuresInferred`` (how the set was anchored) and
         ``hdrio:exposureUnits`` instead of the metadata's; ``hdrio:exposuresUnmeasured``
         (file names) where some brackets could not be checked."""
+        unmeasured = {"hdrio:exposuresUnmeasured": [Path(self.files[j]).name
+                                                    for j in self.unmeasured]}
         if self.inferred:
             return {"hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                     "hdrio:exposuresFromData": 1,
                     "hdrio:exposuresInferred": self.inferred,
-                    "hdrio:exposureUnits": self.units}
-        unmeasured = {"hdrio:exposuresUnmeasured": [Path(self.files[j]).name
-                                                    for j in self.unmeasured]}
+                    "hdrio:exposureUnits": self.units,
+                    **(unmeasured if self.unmeasured else {})}
         return {"hdrio:exposuresMetadata": [f"{t:.9g}" for t in self.metadata],
                 "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                 "hdrio:exposuresFromData": int(self.used),

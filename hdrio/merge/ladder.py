@@ -164,7 +164,8 @@ def in_brightness_order(stack: ExposureStack) -> ExposureStack:
 
 
 def infer_exposures(stack: ExposureStack, start: CameraResponse,
-                    solve: Callable[[ExposureStack], CameraResponse] | None = None
+                    solve: Callable[[ExposureStack], CameraResponse] | None = None,
+                    exclude: np.ndarray | None = None
                     ) -> tuple[ExposureStack, CameraResponse, ExposureCheck]:
     """The exposures of a stack read with no metadata (:func:`needs_inference`).
 
@@ -178,6 +179,8 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
     solve
         Solves the response of a stack (``None``: ``start`` is kept, as for a saved
         response).
+    exclude
+        ``(H, W)`` pixels not compared (a warp's borders and sharp edges), or ``None``.
 
     Returns
     -------
@@ -190,7 +193,7 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
     Brackets that kept their EXIF fix what the pixels cannot: two exposure times or more
     fix the step (the exponent ambiguity), one or more the unit.
     """
-    log_t, unlinked = fit(stack.codes, start)
+    log_t, unlinked = fit(stack.codes, start, exclude=exclude)
     if unlinked:
         c = unlinked[0]
         raise InputError(stack.files[c + 1], "no well-exposed pixels in common with "
@@ -199,7 +202,7 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
     known = exif_exposures(stack)
     # Self-calibration with the starting curve's scale: the ratios become consistent.
     first = replace(stack, exposures=in_order(stack.files, np.exp(log_t)))
-    _, response, check = exposures_from_data(first, start, True, solve)
+    _, response, check = exposures_from_data(first, start, True, solve, exclude=exclude)
     stops = np.diff(np.log2(check.estimated))
     median = float(np.median(stops))
     regular = median > 0 and bool(np.all(np.abs(stops - median) <= STEP_AGREEMENT))
@@ -216,14 +219,14 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
             anchor = np.exp(span * (log_t - log_t[a]))
             how = f"step irregular: anchored to the EXIF of {_names(stack, known)}"
         _, response, check = exposures_from_data(replace(stack, exposures=anchor),
-                                                 response, True, solve)
+                                                 response, True, solve, exclude=exclude)
         estimated = check.estimated
     elif regular:
         step = round(median / CAMERA_STEP) * CAMERA_STEP
         anchor = np.exp2(step * np.arange(stack.count))
         how = f"step inferred: {_stops(step)}"
         _, response, check = exposures_from_data(replace(stack, exposures=anchor),
-                                                 response, True, solve)
+                                                 response, True, solve, exclude=exclude)
         estimated = check.estimated
     else:  # check.estimated is anchored to log_t already (Theil-Sen)
         anchor = np.exp(log_t)
@@ -250,6 +253,42 @@ def infer_exposures(stack: ExposureStack, start: CameraResponse,
     stack = replace(stack, exposures=estimated)
     return stack, response, ExposureCheck(stack.files, anchor, estimated, True, how,
                                           reference, exif)
+
+
+def with_unregistered(check: ExposureCheck, stack: ExposureStack) -> ExposureCheck:
+    """``check``, inferred on the registered brackets of ``stack`` only (alignment's
+    aligned sample: :class:`hdrio.job.stages.ExposureCalibration`), for every bracket of
+    ``stack``: one that could not be registered is placed by the ladder's step from the
+    registered ones (interpolated between them, extrapolated beyond), said in
+    ``inferred`` and listed in ``unmeasured``; relative exposures keep the middle
+    bracket at 1."""
+    index = {name: i for i, name in enumerate(check.files)}
+    kept = np.array([j for j, name in enumerate(stack.files) if name in index])
+    order = [index[stack.files[j]] for j in kept]
+    everywhere = np.arange(stack.count)
+
+    def placed(values: np.ndarray) -> np.ndarray:
+        logs = np.log2(values[order])
+        step = float(np.median(np.diff(logs) / np.diff(kept)))
+        inside = np.interp(everywhere, kept, logs)
+        below, above = everywhere < kept[0], everywhere > kept[-1]
+        inside[below] = logs[0] - step * (kept[0] - everywhere[below])
+        inside[above] = logs[-1] + step * (everywhere[above] - kept[-1])
+        return np.exp2(inside)
+
+    estimated, anchor = placed(check.estimated), placed(check.metadata)
+    unmeasured = tuple(int(j) for j in np.setdiff1d(everywhere, kept))
+    reference = ""
+    if check.exif is None:  # relative: the middle bracket is 1
+        reference = stack.files[stack.count // 2]
+        anchor = anchor / estimated[stack.count // 2]
+        estimated = estimated / estimated[stack.count // 2]
+    exif = None if check.exif is None else np.array(
+        [check.exif[index[name]] if name in index else np.nan for name in stack.files])
+    names = ", ".join(Path(stack.files[j]).name for j in unmeasured)
+    how = check.inferred + (f"; {names} not registered: placed by the step" if names else "")
+    return ExposureCheck(tuple(stack.files), anchor, estimated, True, how, reference, exif,
+                         unmeasured)
 
 
 def exif_exposures(stack: ExposureStack) -> dict[int, float]:
