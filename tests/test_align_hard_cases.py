@@ -371,3 +371,18 @@ def test_a_hand_held_ladder_without_metadata_is_inferred_on_its_registered_brack
     inner &= well_exposed(case.codes, 255)
     assert radiance_error(radiance, truth, inner)["median"] < 1.4 * radiance_error(
         known.radiance, truth, inner)["median"]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_nine_bracket_hand_held_ladder_is_registered_or_refused(seed):
+    """``hand_held(9, seed)``: 9 x 2 EV, every bracket moved by up to 6 px and 0.3 deg.
+    The first pass, with a response solved on the moved brackets, put its short brackets
+    5-10 px off; the second, with the response re-solved on the aligned sample, only
+    refined the base level from there and left brackets 1 and 2 of seed 1 4.35 and 4.37 px
+    off, registered. Measured afresh it finds them within 0.1 px (measured 0.03-0.14 px
+    for every registered bracket of both seeds). Bound: the issue's 0.5 px."""
+    case = hand_held(9, seed)
+    alignment = merge_stack(case.stack(), MergeOptions()).motion.alignment
+    refused = {j for j, _ in alignment.refused}
+    errors = [e for j, e in enumerate(_corner_errors(case, alignment)) if j not in refused]
+    assert len(errors) >= 5 and max(errors) < 0.5, (errors, alignment.refused)
