@@ -349,8 +349,12 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
             break
         if motion.warped:  # as register's re-solve: no invented borders, no sharp edges
             step = base_factor(height, width)  # the solve samples a coarse grid anyway
+            grid = np.diag([float(step), float(step), 1.0])
+            shape = (-(-height // step), -(-width // step))
             for j in range(count):
-                exclude |= sharp_edges(stack.codes[j], stack.code_max, step)
+                edges = sharp_edges(stack.codes[j], stack.code_max, grid, shape)
+                exclude |= np.repeat(np.repeat(edges, step, axis=0), step,
+                                     axis=1)[:height, :width]
         try:
             solved = solve(stack, exclude)
         except HdrioError:  # too little left to solve from: keep the response we have

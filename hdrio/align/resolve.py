@@ -45,7 +45,10 @@ def sampled_stack(stack: ExposureStack, alignment, step: int
         warp = alignment.transforms[j] @ grid
         warp_codes(stack.codes[j], warp, stack.code_max, codes[i])
         uncovered |= coverage(warp, rows, cols, 1, (height, width)) < 1
-        uncovered |= sharp_edges(codes[i], stack.code_max)
+        # Edges within a pixel of each sample: on the warped bracket itself at full
+        # resolution, else where the sample was taken from in the bracket.
+        uncovered |= (sharp_edges(codes[i], stack.code_max) if step == 1 else
+                      sharp_edges(stack.codes[j], stack.code_max, warp, (rows, cols)))
     def pick(values):
         return values if not values else tuple(values[j] for j in kept)
 
@@ -56,41 +59,51 @@ def sampled_stack(stack: ExposureStack, alignment, step: int
                    else stack.channel_gains[kept]), uncovered
 
 
-def sharp_edges(codes: np.ndarray, code_max: int, step: int = 1) -> np.ndarray:
+def sharp_edges(codes: np.ndarray, code_max: int, grid: np.ndarray | None = None,
+                shape: tuple[int, int] | None = None) -> np.ndarray:
     """``(H, W)``: pixels of one bracket ``(H, W, C)`` whose 3x3 neighbourhood spans more
-    than :data:`EDGE_CODES` (mean of channels). With ``step`` > 1 the test is made on
-    every ``step``-th pixel each way (neighbourhoods ``step`` times wider: more pixels
-    excluded, ``step^2`` times less work) and each result repeated over its block."""
-    height, width = codes.shape[:2]
-    edges = np.empty((-(-height // step), -(-width // step)), np.bool_)
-    _sharp_edges(codes, step, np.float32(EDGE_CODES * code_max / 255.0), edges)
-    if step > 1:
-        edges = np.repeat(np.repeat(edges, step, axis=0), step, axis=1)[:height, :width]
+    than :data:`EDGE_CODES` (mean of channels). With ``grid`` (``3 x 3``: a point of a
+    ``shape`` grid to a pixel of ``codes``), the same test at the pixel nearest each
+    grid point, into a ``shape`` mask: a coarse grid's samples tested on their own
+    full-resolution neighbourhoods.
+
+    (A test on the coarse grid itself, its neighbours a grid step apart, left out 84 %
+    of the 24 MP moved speed stack's aligned sample at step 4, and its re-solve 160-269
+    samples of 1000: the merge's median error 2.46x the still stack's.)"""
+    if grid is None:
+        grid, shape = np.eye(3), codes.shape[:2]
+    edges = np.empty(shape, np.bool_)
+    _sharp_edges(codes, np.ascontiguousarray(grid, np.float64),
+                 np.float32(EDGE_CODES * code_max / 255.0), edges)
     return edges
 
 
 @njit(cache=True, nogil=True)
-def _sharp_edges(codes, step, threshold, out):  # pragma: no cover - compiled
-    """:func:`sharp_edges` on the ``step`` grid, into ``out``: the mean of the channels
-    as NumPy's ``mean(axis=-1, dtype=float32)`` makes it (a float32 sum, divided in
-    float64), its 3x3 range (the border's neighbours the border itself, as
+def _sharp_edges(codes, grid, threshold, out):  # pragma: no cover - compiled
+    """:func:`sharp_edges` into ``out``: for each of its points, the pixel of ``codes``
+    nearest ``grid @ (x, y, 1)`` (clipped to the image), the mean of the channels of its
+    3x3 neighbourhood as NumPy's ``mean(axis=-1, dtype=float32)`` makes it (a float32
+    sum, divided in float64), their range (the border's neighbours the border itself, as
     ``scipy.ndimage``'s filters reflect it) and the comparison in float32, so that the
-    mask is NumPy's bit for bit, in one pass and without SciPy's filters (14 calls took
-    1 s of a hand-held 7 x 24 MP merge)."""
+    mask on the identity grid is NumPy's and SciPy's bit for bit, in one pass (14 calls
+    of SciPy's filters took 1 s of a hand-held 7 x 24 MP merge)."""
     rows, cols = out.shape
-    channels = codes.shape[2]
-    grey = np.empty((rows, cols), np.float32)
+    height, width, channels = codes.shape
     for y in range(rows):
         for x in range(cols):
-            total = np.float32(0.0)
-            for c in range(channels):
-                total += np.float32(codes[y * step, x * step, c])
-            grey[y, x] = np.float32(np.float64(total) / channels)
-    for y in range(rows):
-        for x in range(cols):
-            low = high = grey[y, x]
-            for yy in range(max(y - 1, 0), min(y + 2, rows)):
-                for xx in range(max(x - 1, 0), min(x + 2, cols)):
-                    low = min(low, grey[yy, xx])
-                    high = max(high, grey[yy, xx])
+            w = grid[2, 0] * x + grid[2, 1] * y + grid[2, 2]
+            sx = (grid[0, 0] * x + grid[0, 1] * y + grid[0, 2]) / w
+            sy = (grid[1, 0] * x + grid[1, 1] * y + grid[1, 2]) / w
+            cx = min(max(int(np.floor(sx + 0.5)), 0), width - 1)
+            cy = min(max(int(np.floor(sy + 0.5)), 0), height - 1)
+            low = np.float32(np.inf)
+            high = np.float32(-np.inf)
+            for yy in range(max(cy - 1, 0), min(cy + 2, height)):
+                for xx in range(max(cx - 1, 0), min(cx + 2, width)):
+                    total = np.float32(0.0)
+                    for c in range(channels):
+                        total += np.float32(codes[yy, xx, c])
+                    grey = np.float32(np.float64(total) / channels)
+                    low = min(low, grey)
+                    high = max(high, grey)
             out[y, x] = high - low > threshold
