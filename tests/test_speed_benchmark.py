@@ -129,3 +129,20 @@ def test_the_many_core_run_measures_the_merge_its_floor_and_a_shoot(tmp_path):
     assert shoot["throughput_ratios"][
         "--group, local pool of 2 (--threads 2): this / the baseline (sets/min)"] > 0
     assert sum(row["run"].endswith(" (baseline)") for row in shoot["rows"]) == 2
+
+
+def test_the_motion_benchmark_measures_the_solved_path_against_the_truth(tmp_path, capsys):
+    """``benchmarks.motion`` (tiny: 384 x 512, one repeat) prints and writes every row,
+    including the moving stack merged with its response solved (what a user runs; the
+    other rows give the true response): its error over the still stack's, finite and
+    positive, and the phases' ratio."""
+    from benchmarks.motion import main as motion
+
+    out = tmp_path / "motion.json"
+    assert motion(["--size", "384x512", "--brackets", "5", "--repeats", "1", "--json",
+                   str(out)]) == 0
+    rows, printed = json.loads(out.read_text())["rows"], capsys.readouterr().out
+    for name in ("solved: median error / the still stack's",
+                 "solved: p99 error / the still stack's",
+                 "solved: alignment, re-merge and deghosting / merge, wall"):
+        assert 0 < rows[name] < float("inf") and name in printed, (name, rows[name])
