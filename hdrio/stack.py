@@ -119,6 +119,13 @@ class ExposureStack:
         return np.log(self.exposures)
 
 
+def first_too_close(exposures: np.ndarray) -> int | None:
+    """The first ``j`` whose next exposure is not :data:`MIN_EXPOSURE_STEP` longer (the
+    brackets are in exposure order), or ``None``."""
+    close = np.flatnonzero(exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP))
+    return int(close[0]) if close.size else None
+
+
 def validate_stack(stack: ExposureStack) -> None:
     """Raise :class:`InputError` naming the file at fault if the stack is unusable."""
     codes, exposures, files = stack.codes, stack.exposures, stack.files
@@ -134,9 +141,8 @@ def validate_stack(stack: ExposureStack) -> None:
             raise InputError(name, f"exposure must be a positive number, got {value!r}")
     # Cameras step exposure in thirds of a stop; brackets closer than 1 % are the same
     # exposure, and differ only by noise, which says nothing about the response.
-    close = exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
-    if np.any(close):
-        j = int(np.flatnonzero(close)[0])
+    j = first_too_close(exposures)
+    if j is not None:
         raise InputError(
             files[j + 1],
             f"same exposure ({exposures[j + 1]:g}) as {files[j]} ({exposures[j]:g}): every "

@@ -31,7 +31,7 @@ from hdrio.errors import InputError
 from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
-from hdrio.stack import MIN_EXPOSURE_STEP, ExposureStack
+from hdrio.stack import ExposureStack, first_too_close
 
 WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
@@ -351,9 +351,8 @@ def in_order(files: Sequence[str], estimated: np.ndarray) -> np.ndarray:
     """``estimated``, where each bracket is longer than the one before it (as the stack
     is sorted); else an error naming the first that is not, instead of merging with
     exposures the brackets themselves contradict."""
-    close = estimated[1:] < estimated[:-1] * (1.0 + MIN_EXPOSURE_STEP)
-    if np.any(close):
-        j = int(np.flatnonzero(close)[0])
+    j = first_too_close(estimated)
+    if j is not None:
         raise InputError(files[j + 1], (
             f"--exposures-from-data: the data say its exposure is {_text(estimated[j + 1])}, "
             f"not longer than {Path(files[j]).name}'s {_text(estimated[j])}: the brackets "
