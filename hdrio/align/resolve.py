@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from hdrio.align.warp import coverage, warp_codes
+from hdrio.parallel import on_threads
 from hdrio.stack import ExposureStack
 
 EDGE_CODES = 24.0
@@ -73,23 +74,25 @@ def sharp_edges(codes: np.ndarray, code_max: int, grid: np.ndarray | None = None
     if grid is None:
         grid, shape = np.eye(3), codes.shape[:2]
     edges = np.empty(shape, np.bool_)
-    _sharp_edges(codes, np.ascontiguousarray(grid, np.float64),
-                 np.float32(EDGE_CODES * code_max / 255.0), edges)
+    on_threads(_sharp_edges, shape[0], codes, np.ascontiguousarray(grid, np.float64),
+               np.float32(EDGE_CODES * code_max / 255.0), edges)
     return edges
 
 
 @njit(cache=True, nogil=True)
-def _sharp_edges(codes, grid, threshold, out):  # pragma: no cover - compiled
-    """:func:`sharp_edges` into ``out``: for each of its points, the pixel of ``codes``
+def _sharp_edges(start, stop, codes, grid, threshold, out):  # pragma: no cover - compiled
+    """:func:`sharp_edges` into rows ``start .. stop - 1`` of ``out`` (on every core: one
+    thread took 0.45 s of a moved 7 x 24 MP stack's re-solve, 60 ms a bracket at step
+    4): for each of its points, the pixel of ``codes``
     nearest ``grid @ (x, y, 1)`` (clipped to the image), the mean of the channels of its
     3x3 neighbourhood as NumPy's ``mean(axis=-1, dtype=float32)`` makes it (a float32
     sum, divided in float64), their range (the border's neighbours the border itself, as
     ``scipy.ndimage``'s filters reflect it) and the comparison in float32, so that the
     mask on the identity grid is NumPy's and SciPy's bit for bit, in one pass (14 calls
     of SciPy's filters took 1 s of a hand-held 7 x 24 MP merge)."""
-    rows, cols = out.shape
+    cols = out.shape[1]
     height, width, channels = codes.shape
-    for y in range(rows):
+    for y in range(start, stop):
         for x in range(cols):
             w = grid[2, 0] * x + grid[2, 1] * y + grid[2, 2]
             sx = (grid[0, 0] * x + grid[0, 1] * y + grid[0, 2]) / w
