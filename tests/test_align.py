@@ -759,13 +759,14 @@ def test_codes_that_fall_with_exposure_are_found_and_grown_by_a_cell():
 
 
 def test_a_coarse_aligned_sample_leaves_out_the_edges_a_full_one_does():
-    """Above 1.6 MP the response is re-solved on every ``step``-th pixel of the aligned
-    brackets, without sharp edges. Tested on the coarse grid itself (neighbours a grid
-    step apart), the speed scene moved as ``benchmarks.motion`` moves it left out 58 %
-    at step 1, 78 % at step 2 and 85 % at step 4 (at 24 MP, step 4: the re-solve had 160
+    """Above 65,536 pixels the response is re-solved on every ``step``-th pixel of the
+    aligned brackets (:func:`hdrio.align.resolve.sample_step`: 3 here, 20 at 24 MP),
+    without sharp edges. Tested on the coarse grid itself (neighbours a grid step
+    apart), the speed scene moved as ``benchmarks.motion`` moves it left out 58 % at
+    step 1, 78 % at step 2 and 85 % at step 4 (at 24 MP, step 4: the re-solve had 160
     samples of 1000 and the merge's median error 2.46x the still stack's,
     docs/motion.md). Each sample's own full-resolution neighbourhood: 58 % at every
-    step (measured 0.578, 0.579, 0.584). Bound: within 0.03 of step 1's."""
+    step (measured 0.580, 0.582, 0.586). Bound: within 0.03 of step 1's."""
     from benchmarks.motion import moved
     from benchmarks.speed.scene import bracket_stack, true_response
     from hdrio.align.resolve import sampled_stack
@@ -776,3 +777,21 @@ def test_a_coarse_aligned_sample_leaves_out_the_edges_a_full_one_does():
     assert 0.2 < full < 0.9
     for step in (2, 4):
         assert abs(float(sampled_stack(stack, alignment, step)[1].mean()) - full) < 0.03, step
+
+
+def test_the_aligned_sample_holds_every_point_its_readers_read():
+    """The re-solve's aligned sample (:func:`hdrio.align.resolve.sample_step`) holds at
+    least as many points as the grids read from it: the white levels' and mixing test's
+    (2^16) and the response sampler's candidates (2^14). With fewer, those readers would
+    read every point of a sample coarser than they are built for."""
+    from hdrio.align.resolve import SAMPLE_POINTS, sample_step
+    from hdrio.io.staging import CANDIDATE_LIMIT
+    from hdrio.merge.clipping import MIXING_GRID_LIMIT
+    from hdrio.radiometry.noise_fit import NOISE_GRID_LIMIT
+
+    assert SAMPLE_POINTS >= max(MIXING_GRID_LIMIT, CANDIDATE_LIMIT, NOISE_GRID_LIMIT)
+    for height, width in ((200, 300), (4000, 6000), (6000, 4000), (1080, 720)):
+        step = sample_step(height, width)
+        points = -(-height // step) * -(-width // step)
+        assert points <= SAMPLE_POINTS and (step == 1 or points > SAMPLE_POINTS // 4), (
+            height, width, step)

@@ -225,8 +225,10 @@ def test_a_hand_held_ladder_registers_its_darkest_bracket():
     registered: only 0.0 % ... unclipped'); the two longest, clipped at 98-100 % of
     their pixels, are not, and are merged only where no registered bracket sees the
     scene (flagged in the motion layer and the header). Measured against the same stack
-    held still, in the reference's frame: median 1.67x, p99 2.44x (the issue's bounds
-    1.3x and 2x: not met, the sun's edge and the city lights); before: 5.65x and 6.91x.
+    held still, in the reference's frame: median 1.31x, p99 2.28x (the issue's bounds
+    1.3x and 2x: not met, the sun's edge and the city lights); 1.67x and 2.44x until the
+    re-solve's sample was blurred alike; 5.65x and 6.91x before the shortest was
+    registered.
     Bounds here: every registered bracket within 0.2 px of its true warp at the corners,
     median 2x and p99 3x."""
     from hdrio.align.lucaskanade import corner_motion
@@ -303,10 +305,11 @@ def test_a_hand_held_ladders_exposures_are_measured_on_its_registered_brackets(s
     runs on the registered brackets, the ones that could not be registered keep their
     metadata (``unmeasured``, in the header), and ``--exposures-from-data`` fits the
     exposures with alignment's re-solved response. Bounds: no warning; the fitted
-    exposures within 0.01 stop of the true ones (measured 0.001: the generator's PNG
-    exposures are exact); the merge with them within 5 % of the default's median error
-    (measured 1.386 against 1.395 and 1.674 against 1.674, in units of the still
-    stack's)."""
+    exposures within 0.01 stop of the true ones (measured 0.0005 and 0.0011 stop, seeds
+    0 and 1; 0.0014 and 0.0097 until the re-solve's sample was blurred alike: the fit of
+    bracket 5, clipped at 98 % of its pixels, read sharp codes beside its clipped
+    ones); the merge with them within 5 % of the default's median error (measured
+    1.313 against 1.315 and 1.293 against 1.299, in units of the still stack's)."""
     from hdrio.job.output import exr_attributes
 
     moving = hand_held(7, seed)
@@ -338,10 +341,11 @@ def test_a_hand_held_ladder_without_metadata_is_inferred_on_its_registered_brack
     brackets are registered with provisional exposures and the ladder is inferred on
     alignment's aligned sample; the
     brackets that could not be registered are placed by the step, said in the summary
-    and the header. Bounds: every bracket within 0.15 stop of the truth, relative to the
-    middle one (measured: 0.13 the shortest, which sees only the sun, 0.034 the placed
-    ones); the merge's median error within 1.4x that of the same files merged with their
-    true exposures (measured 1.24x and 0.99x for seeds 0 and 1)."""
+    and the header. Bounds: every bracket within 0.05 stop of the truth, relative to the
+    middle one (measured: 0.017 the shortest, which sees only the sun, 0.006 the placed
+    ones; 0.13 and 0.034 until the aligned sample was blurred alike); the merge's median
+    error within 1.15x that of the same files merged with their true exposures (measured
+    1.01x and 0.93x for seeds 0 and 1; 1.24x and 0.99x before)."""
     import OpenImageIO as oiio
 
     from hdrio.job.run import merge_paths
@@ -359,7 +363,7 @@ def test_a_hand_held_ladder_without_metadata_is_inferred_on_its_registered_brack
     assert unmeasured and f"{', '.join(unmeasured)} not registered: placed by the step" in out
     used = np.array(spec.getattribute("hdrio:exposures"), float)
     stops = np.log2(used / used[3]) - np.log2(case.exposures / case.exposures[3])
-    assert np.max(np.abs(stops)) < 0.15, stops
+    assert np.max(np.abs(stops)) < 0.05, stops
     inferred = merge_paths(paths, options=MergeOptions(exposures_from_data=True))
     known = merge_stack(case.stack(), MergeOptions())
     reference = known.motion.alignment.reference
@@ -369,20 +373,51 @@ def test_a_hand_held_ladder_without_metadata_is_inferred_on_its_registered_brack
     inner = np.zeros(case.codes.shape[1:3], bool)
     inner[16:-16, 16:-16] = True
     inner &= well_exposed(case.codes, 255)
-    assert radiance_error(radiance, truth, inner)["median"] < 1.4 * radiance_error(
+    assert radiance_error(radiance, truth, inner)["median"] < 1.15 * radiance_error(
         known.radiance, truth, inner)["median"]
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0, 1, 5])
 def test_a_nine_bracket_hand_held_ladder_is_registered_or_refused(seed):
     """``hand_held(9, seed)``: 9 x 2 EV, every bracket moved by up to 6 px and 0.3 deg.
     The first pass, with a response solved on the moved brackets, put its short brackets
     5-10 px off; the second, with the response re-solved on the aligned sample, only
     refined the base level from there and left brackets 1 and 2 of seed 1 4.35 and 4.37 px
     off, registered. Measured afresh it finds them within 0.1 px (measured 0.03-0.14 px
-    for every registered bracket of both seeds). Bound: the issue's 0.5 px."""
+    for every registered bracket of both seeds). Bound: the issue's 0.5 px.
+
+    A bracket is refused only for having too little usable in common with its neighbour
+    (the shortest and the two longest), never for its evidence: bracket 3 of seed 5,
+    measured 0.02 px from its true warp, was refused as "the shift fits the fine level
+    only" while the alias test compared misfits on all of the coarsest level's points,
+    60 % of them a smooth sky (:data:`hdrio.align.registration.COARSE_SHARE`)."""
     case = hand_held(9, seed)
     alignment = merge_stack(case.stack(), MergeOptions()).motion.alignment
     refused = {j for j, _ in alignment.refused}
     errors = [e for j, e in enumerate(_corner_errors(case, alignment)) if j not in refused]
     assert len(errors) >= 5 and max(errors) < 0.5, (errors, alignment.refused)
+    assert all(why.startswith("only ") for _, why in alignment.refused), alignment.refused
+
+
+@pytest.mark.parametrize("seed", [2, 4, 5])
+def test_a_hand_held_ladders_median_error_is_within_the_issues_bound(seed):
+    """``hand_held(7, seed)`` against the same stack held still, in the reference's
+    frame: median error at most 1.3x (issue 28). The response re-solved after the warp
+    bent at both ends while the reference was sharp and the warped brackets blurred by
+    their interpolation (the sampler picks a texture's darkest and brightest codes,
+    where a blurred bracket reads nearer the mean): 1.34, 1.35 and 1.58x for these seeds;
+    now every bracket is sampled through the same 3x3 binomial
+    (:func:`hdrio.align.resolve.sampled_stack`), measured 1.25, 1.23 and 1.22x (seeds
+    0-9: 1.22-1.32x). The issue's p99 bound, 2x, is not met (1.95-2.42x): the
+    brackets that could not be registered, and the sun's edge."""
+    moving, held = hand_held(7, seed), hand_held(7, seed, still=True)
+    result = merge_stack(moving.stack(), MergeOptions())
+    still = merge_stack(held.stack(), MergeOptions())
+    reference = result.motion.alignment.reference
+    height, width = moving.codes.shape[1:3]
+    inner = np.zeros((height, width), bool)
+    inner[16:-16, 16:-16] = True
+    inner &= well_exposed(held.codes, 255)
+    moved = radiance_error(result.radiance, moving.truth_in(reference), inner)["median"]
+    base = radiance_error(still.radiance, held.truth_in(reference), inner)["median"]
+    assert moved <= 1.3 * base, moved / base

@@ -6,7 +6,7 @@ of each bracket) out. The re-merge that reads them is the job's
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -17,7 +17,6 @@ from hdrio.align.deghost import (
     consistency_variance,
     deghost,
 )
-from hdrio.align.pyramid import base_factor
 from hdrio.align.quick import looks_still, usable_masks
 from hdrio.align.registration import (
     Alignment,
@@ -27,7 +26,7 @@ from hdrio.align.registration import (
     reference_bracket,
     register,
 )
-from hdrio.align.resolve import sharp_edges
+from hdrio.align.resolve import solve_on_sample
 from hdrio.align.warp import clipped_elsewhere, coverage, seen_elsewhere
 from hdrio.errors import HdrioError
 from hdrio.io.staging import gather_pixels
@@ -347,16 +346,13 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     for attempt in range(RESOLVES):
         if exclude is None:
             break
-        if motion.warped:  # as register's re-solve: no invented borders, no sharp edges
-            step = base_factor(height, width)  # the solve samples a coarse grid anyway
-            grid = np.diag([float(step), float(step), 1.0])
-            shape = (-(-height // step), -(-width // step))
-            for j in range(count):
-                edges = sharp_edges(stack.codes[j], stack.code_max, grid, shape)
-                exclude |= np.repeat(np.repeat(edges, step, axis=0), step,
-                                     axis=1)[:height, :width]
         try:
-            solved = solve(stack, exclude)
+            # Warped brackets as register's re-solve has them: on the aligned sample, no
+            # invented borders, no sharp edges, every bracket blurred alike (the stack
+            # is in the reference's frame now).
+            solved = (solve_on_sample(stack, replace(motion.alignment, transforms=np.repeat(
+                np.eye(3)[None], count, axis=0)), solve, exclude) if motion.warped
+                else solve(stack, exclude))
         except HdrioError:  # too little left to solve from: keep the response we have
             break
         # The first response and its noise fit saw the movers too (a dark object in
