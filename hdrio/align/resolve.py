@@ -13,6 +13,7 @@ solved on warped brackets beside a sharp reference bends at both ends
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -69,11 +70,11 @@ def sampled_stack(stack: ExposureStack, alignment, step: int
     where a blurred bracket reads nearer the texture's mean than the sharp reference
     does: the curve bends at both ends. Each bracket, the reference included, is read at
     the nine points a pixel apart around each sample (nine warps of the grid, shifted)
-    and those codes weighted 1-2-1 each way, so that every bracket is blurred alike (and
-    its noise variance is about a fifth of one pixel's). A channel at its limit at any
-    of the nine is taken as clipped there, else one at 0 as black: the filter never
-    makes a clipped code look like a measurement, nor keeps one sharp code beside
-    blurred ones. On ``tests/hard_cases.py``'s ``hand_held(7)`` ladders, seeds 0-9, the
+    and those codes weighted 1-2-1 each way, so that every bracket is blurred alike (its
+    noise variance 0.14 of one pixel's, the sum of the squared weights). A channel at
+    its limit at any of the nine is taken as clipped there, else one at 0 as black: the
+    filter never makes a clipped code look like a measurement, nor keeps one sharp code
+    beside blurred ones. On ``tests/hard_cases.py``'s ``hand_held(7)`` ladders, seeds 0-9, the
     merge's median error went from 1.34-1.67x the still stack's to 1.22-1.32x
     (docs/motion.md, "The re-solve's sample, blurred alike"); with the nearest pixel's
     own 3x3 binomial mean instead (no interpolation), 1.27-1.65x."""
@@ -120,8 +121,9 @@ def sampled_stack(stack: ExposureStack, alignment, step: int
                    else stack.channel_gains[kept]), uncovered
 
 
-def solve_on_sample(stack: ExposureStack, alignment, solve, exclude: np.ndarray | None = None
-                    ) -> CameraResponse:
+def solve_on_sample(stack: ExposureStack, alignment,
+                    solve: Callable[[ExposureStack, np.ndarray], CameraResponse],
+                    exclude: np.ndarray | None = None) -> CameraResponse:
     """``solve(small, exclude)`` (a response solve, :func:`hdrio.job.stages.response_solver`)
     on the aligned sample of ``stack`` (:func:`sampled_stack`, on the grid of
     :func:`sample_step`), leaving out the pixels ``exclude`` (``(H, W)``, in the
