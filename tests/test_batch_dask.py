@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from hdrio.batch import MergeSet, merge_shoot
+from hdrio.batch.journal import record_path
 from hdrio.cli import main
 from hdrio.io.images import read_image
 
@@ -174,7 +175,11 @@ def test_client_killed_mid_run_then_rerun_redoes_nothing_finished(shoot, tmp_pat
     while any(map(_alive, workers)) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert len(workers) == 2 and not any(map(_alive, workers)), "orphaned Dask workers"
-    written = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "hdr").glob("*.exr")}
+    # Finished: written and recorded. A worker killed between its set's write and its
+    # record leaves an output the journal does not vouch for, which is run again (CI
+    # once saw 4 outputs and 3 records).
+    written = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "hdr").glob("*.exr")
+               if record_path([p]).is_file()}
     assert len(written) >= 3
 
     tasks, results = merge_shoot(shoot, pattern, work=SlowMerge(), client=client)

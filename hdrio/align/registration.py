@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hdrio.align.highlight_shift import highlight_shift
 from hdrio.align.lucaskanade import (
     MIN_POINTS,
     corner_motion,
@@ -32,6 +33,7 @@ from hdrio.align.lucaskanade import (
     strongest,
 )
 from hdrio.align.pyramid import (
+    REGISTRABLE,
     BaseImage,
     base_factor,
     base_image,
@@ -115,6 +117,10 @@ class Alignment:
     refused: tuple[tuple[int, str], ...] = ()
     """``(bracket, why)`` for each bracket not registered (left unwarped): too little of
     it usable, or a shift the evidence does not support."""
+    by_highlights: tuple[int, ...] = ()
+    """Brackets registered by the highlights their longer neighbour clipped
+    (:mod:`hdrio.align.highlight_shift`): too little of them usable where the neighbour
+    is, a shift measured at the highlights (rotation the neighbour's)."""
 
     @property
     def moved(self) -> bool:
@@ -134,8 +140,11 @@ class Alignment:
                              "where no registered bracket sees the scene (motion layer)")
                 continue
             angle = math.degrees(math.atan2(warp[1, 0], warp[0, 0]))
+            how = (", by the highlights its neighbour clipped" if j in self.by_highlights
+                   else "")
             lines.append(f"{name}: shift {warp[0, 2]:+.2f}, {warp[1, 2]:+.2f} px, "
-                         f"rotation {angle:+.3f} deg (corners move {self.motion[j]:.2f} px)")
+                         f"rotation {angle:+.3f} deg (corners move {self.motion[j]:.2f} px"
+                         f"{how})")
         return lines
 
 
@@ -262,18 +271,26 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
     bases = [base_image(stack.codes[j], linear[j], stack.code_max, factor)
              for j in range(count)]
     reference = reference_bracket(stack.codes, stack.code_max)
+    top = well_exposed_codes(stack.code_max, REGISTRABLE)[1]  # a base's highest valid code
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape))
     transforms = np.repeat(np.eye(3)[None], count, axis=0)  # base pixels, then full
     refused: dict[int, str] = {}
+    by_highlights: list[int] = []
     pyramids = _Pyramids(bases, levels)
 
-    def pair(k: int, j: int) -> tuple[np.ndarray, str | None]:
+    def pair(k: int, j: int) -> tuple[np.ndarray, str | None, bool]:
+        """``j``'s warp to ``k``, why it is refused (or ``None``), and whether it was
+        measured on the highlights ``k`` clipped."""
         why = unusable(bases[k].valid, bases[j].valid)
+        if why is not None and j < k:  # a shorter one: by the highlights k clipped
+            step = highlight_shift(bases[k].grey >= top, bases[j].log >= float(
+                np.log(linear[k][:, top].sum())))
+            return (np.eye(3), why, False) if step is None else (step, None, True)
         if why is not None:
-            return np.eye(3), why
+            return np.eye(3), why, False
         with pyramids.held(k) as pyramid_k, pyramids.held(j) as pyramid_j:
-            return _register_pair(pyramid_k, pyramid_j, bases[k], bases[j], model,
-                                  stack.code_max)
+            return (*_register_pair(pyramid_k, pyramid_j, bases[k], bases[j], model,
+                                    stack.code_max), False)
 
     # Each bracket is aligned to its nearest registered neighbour towards the reference
     # (the pair shares the most well-exposed pixels), and the warps composed. Every
@@ -290,10 +307,12 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
         for j in side:
             if j in refused:
                 continue
-            step, why = measured[(k, j)] if (k, j) in measured else pair(k, j)
+            step, why, highlights = measured[(k, j)] if (k, j) in measured else pair(k, j)
             if why is not None:  # left unwarped; the next bracket out pairs with k
                 refused[j] = why
                 continue
+            if highlights:
+                by_highlights.append(j)
             transforms[j] = step @ transforms[k]
             k = j
     motion = [0.0] * count
@@ -301,7 +320,7 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
         transforms[j] = rescale(transforms[j], factor) if factor > 1 else transforms[j]
         motion[j] = corner_motion(transforms[j], height, width)
     return Alignment(reference, transforms, model, tuple(motion),
-                     tuple(sorted(refused.items())))
+                     tuple(sorted(refused.items())), tuple(sorted(by_highlights)))
 
 
 def unusable(valid_k: np.ndarray, valid_j: np.ndarray, scale: float = 1.0) -> str | None:

@@ -166,6 +166,9 @@ def motion_attributes(result: MergeResult) -> dict[str, object]:
             attributes["hdrio:alignUnregistered"] = [
                 str(result.stack.files[j]) for j in refused]
             attributes["hdrio:alignUnregisteredFraction"] = motion.unregistered_fraction()
+        if alignment.by_highlights and motion.warped:
+            attributes["hdrio:alignByHighlights"] = [
+                str(result.stack.files[j]) for j in alignment.by_highlights]
     if motion.deghosting is not None:
         attributes["hdrio:deghostedFraction"] = float(motion.deghosting.fraction)
         if result.motion_test_exposures is not None:

@@ -1,0 +1,63 @@
+"""Registering a bracket by the highlights its neighbour clipped.
+
+The shortest bracket of a long ladder may see only the brightest things in the scene (a
+sun, lamps): too little of it is well exposed where its neighbour is for the edges of
+:func:`hdrio.align.registration.estimate_alignment` to register it, and yet it alone
+reads the highlights, where an HDRI's lighting lives. Its neighbour clipped those very
+highlights, so the two share a shape: the region where the scene is brighter than the
+neighbour's clip. That region, thresholded in each bracket (the neighbour's codes at
+its top, the short bracket's radiance above the neighbour's clip level), is matched by
+cross-correlation, and the shift read at sub-pixel from the peak: a translation, which
+is what matters across a highlight (a rotation of a few tenths of a degree moves a
+highlight's own pixels by hundredths of one).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MIN_PIXELS = 16
+"""Base pixels the clipped region must hold in each bracket to be matched."""
+
+MAX_SHIFT = 64
+"""Base pixels: the largest shift looked for (the bitmaps' reach, six levels)."""
+
+MIN_OVERLAP = 0.6
+"""The matched regions' intersection over union at the best shift, at least."""
+
+
+def highlight_shift(clipped: np.ndarray, bright: np.ndarray) -> np.ndarray | None:
+    """``x_short = W x_neighbour`` (3x3, base pixels, a translation) matching
+    ``clipped`` (``(h, w)`` bool: the neighbour's clipped pixels) to ``bright`` (the
+    shorter bracket's pixels brighter than the neighbour's clip), or ``None`` when the
+    regions are too small, the shift beyond :data:`MAX_SHIFT`, or they do not match
+    (:data:`MIN_OVERLAP`)."""
+    a, b = clipped.astype(np.float64), bright.astype(np.float64)
+    if min(a.sum(), b.sum()) < MIN_PIXELS:
+        return None
+    height, width = a.shape
+    shape = (2 * height, 2 * width)  # zero-padded: no wrap-around
+    # C(d) = sum_x a(x) b(x + d): the peak is where b's region sits relative to a's.
+    c = np.fft.irfft2(np.conj(np.fft.rfft2(a, shape)) * np.fft.rfft2(b, shape), shape)
+    dy = np.fft.fftfreq(shape[0], 1.0 / shape[0]).astype(int)
+    dx = np.fft.fftfreq(shape[1], 1.0 / shape[1]).astype(int)
+    reach = (np.abs(dy)[:, None] <= MAX_SHIFT) & (np.abs(dx)[None, :] <= MAX_SHIFT)
+    c = np.where(reach, c, -np.inf)
+    py, px = np.unravel_index(int(np.argmax(c)), c.shape)
+    overlap = c[py, px]
+    if not overlap / (a.sum() + b.sum() - overlap) >= MIN_OVERLAP:
+        return None
+    sy = dy[py] + _vertex(c[(py - 1) % shape[0], px], overlap, c[(py + 1) % shape[0], px])
+    sx = dx[px] + _vertex(c[py, (px - 1) % shape[1]], overlap, c[py, (px + 1) % shape[1]])
+    return np.array([[1.0, 0.0, sx], [0.0, 1.0, sy], [0.0, 0.0, 1.0]])
+
+
+def _vertex(before: float, peak: float, after: float) -> float:
+    """The parabola's vertex through three equally spaced values, relative to the middle
+    one (within half a step)."""
+    if not (np.isfinite(before) and np.isfinite(after)):
+        return 0.0
+    curvature = before - 2.0 * peak + after
+    if curvature >= 0.0:
+        return 0.0
+    return float(np.clip(0.5 * (before - after) / curvature, -0.5, 0.5))
