@@ -795,3 +795,26 @@ def test_the_aligned_sample_holds_every_point_its_readers_read():
         points = -(-height // step) * -(-width // step)
         assert points <= SAMPLE_POINTS and (step == 1 or points > SAMPLE_POINTS // 4), (
             height, width, step)
+
+
+def test_highlight_shift_finds_a_discs_sub_pixel_shift_and_refuses_what_does_not_match():
+    """:func:`hdrio.align.highlight_shift.highlight_shift` on masks of a disc (radius 6
+    base pixels, as a neighbour's clipped sun and a shorter bracket's pixels above that
+    clip): the shift of the second against the first, whole and fractional, within
+    0.25 px (a binary disc's correlation peak read by a parabola; measured 0-0.08);
+    ``None`` for regions under 16 pixels, for two discs of different sizes (intersection
+    over union under 0.6) and for a shift beyond 64."""
+    from hdrio.align.highlight_shift import highlight_shift
+
+    yy, xx = np.mgrid[0:120, 0:160].astype(float)
+
+    def disc(cx, cy, radius=6.0):
+        return np.hypot(xx - cx, yy - cy) <= radius
+
+    for dx, dy in ((0.0, 0.0), (3.0, -2.0), (2.4, -1.7), (-7.5, 4.25)):
+        warp = highlight_shift(disc(60.0, 50.0), disc(60.0 + dx, 50.0 + dy))
+        assert warp is not None
+        assert abs(warp[0, 2] - dx) < 0.25 and abs(warp[1, 2] - dy) < 0.25, (dx, dy, warp)
+    assert highlight_shift(disc(60.0, 50.0, 2.0), disc(61.0, 50.0, 2.0)) is None
+    assert highlight_shift(disc(60.0, 50.0, 6.0), disc(60.0, 50.0, 12.0)) is None
+    assert highlight_shift(disc(20.0, 50.0), disc(100.0, 50.0)) is None
