@@ -818,3 +818,32 @@ def test_highlight_shift_finds_a_discs_sub_pixel_shift_and_refuses_what_does_not
     assert highlight_shift(disc(60.0, 50.0, 2.0), disc(61.0, 50.0, 2.0)) is None
     assert highlight_shift(disc(60.0, 50.0, 6.0), disc(60.0, 50.0, 12.0)) is None
     assert highlight_shift(disc(20.0, 50.0), disc(100.0, 50.0)) is None
+
+
+def test_masked_ncc_shift_finds_a_mostly_clipped_brackets_shift_and_refuses_the_unrelated():
+    """:func:`hdrio.align.correlation.masked_ncc_shift` on a smooth random field (log
+    radiance) and the same field moved by whole pixels, an exposure offset added and 95 %
+    of it clipped (only its darkest 5 % usable, as a long bracket's shadows): the exact
+    shift, where the bitmaps' median threshold sits in the clip. ``None`` for an
+    unrelated field (masked or not) and for masks that never overlap enough."""
+    import scipy.ndimage
+
+    from hdrio.align.correlation import masked_ncc_shift
+
+    def field(seed):
+        values = scipy.ndimage.gaussian_filter(
+            np.random.default_rng(seed).standard_normal((160, 220)), 3.0)
+        return values / values.std()
+
+    scene, other = field(3), field(4)
+    fixed = scene[20:140, 20:200]
+    everywhere = np.ones_like(fixed, bool)
+    for dx, dy in ((0, 0), (5, -3), (-11, 7)):
+        moving = scene[20 + dy:140 + dy, 20 + dx:200 + dx]  # shows fixed's x + d at x
+        usable = moving < np.quantile(moving, 0.05)
+        warp = masked_ncc_shift(fixed, everywhere, moving + 1.4, usable, 20)
+        assert warp is not None and np.allclose(warp[:2, 2], (-dx, -dy)), (dx, dy, warp)
+    unrelated = other[20:140, 20:200]
+    assert masked_ncc_shift(fixed, everywhere, unrelated, everywhere, 20) is None
+    assert masked_ncc_shift(fixed, everywhere, unrelated, unrelated < -1.5, 20) is None
+    assert masked_ncc_shift(fixed, fixed < -2.5, fixed + 1.0, fixed > 2.5, 20) is None

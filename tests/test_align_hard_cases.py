@@ -164,8 +164,8 @@ def _corner_errors(case, alignment) -> list[float]:
 @pytest.mark.parametrize("scene", [
     "Desk",
     pytest.param("MtTamWest", marks=pytest.mark.xfail(strict=True, reason=(
-        "a textured figure before a plain sky leads registration: measured 0.62-3.87 px, "
-        "38.6 px for the shortest bracket (docs/motion.md, 'Found, not fixed')")))])
+        "a textured figure before a plain sky leads registration: measured 1.76-6.89 px "
+        "(docs/motion.md, 'Found, not fixed')")))])
 def test_a_hand_held_stack_with_a_walker_is_registered(scene):
     """A figure walking through a hand-held 5 x 2 EV JPEG ladder
     (:func:`tests.hard_cases.hand_held_walkers`, seed 1): every bracket within 0.5 px of
@@ -180,9 +180,7 @@ def test_a_hand_held_stack_with_a_walker_is_registered(scene):
 
 @pytest.mark.parametrize("scene,frames,ev,seed", [
     ("Desk", 3, 1.5, 1), ("StillLife", 5, 2.0, 0), ("StillLife", 5, 2.0, 1),
-    pytest.param("GoldenGate", 7, 2.0, 1, marks=pytest.mark.xfail(strict=True, reason=(
-        "a bracket registered 5.9 px off (docs/motion.md, 'Hand-held ladders of other "
-        "crops')")))])
+    ("GoldenGate", 7, 2.0, 1), ("GoldenGate", 7, 2.0, 2)])
 def test_a_hand_held_ladder_is_registered_or_refused(scene, frames, ev, seed):
     """Generated hand-held JPEG ladders (:func:`tests.hard_cases.hand_held_walkers`
     without the figure): every bracket registered within 0.5 px of its true warp at the
@@ -190,8 +188,16 @@ def test_a_hand_held_ladder_is_registered_or_refused(scene, frames, ev, seed):
     merged misregistered. Before the misfits of a warp and of no motion were compared on
     the same points: Desk's middle bracket of three refused ('fits the fine level only',
     0.102 against 0.065: no motion kept the easier points), StillLife's five registered
-    up to 2.3, 5.6 and 9.1 px off (seeds 0-2). Measured now: 0.26 px; 0.13 and 0.34 px
-    with the longest refused."""
+    up to 2.3, 5.6 and 9.1 px off (seeds 0-2). Measured: 0.26 px; 0.13 and 0.34 px
+    with the longest refused.
+
+    GoldenGate's 7-bracket ladder was registered 5.9 and 9.1 px off (seeds 1, 2): true
+    shifts of 1-2 px judged "no motion" on two thirds of a 200 x 300 base (its smooth sky
+    fits any shift alike; the judge now reads the strongest tenth,
+    :data:`hdrio.align.registration.JUDGE_SHARE`), and a 9 px shift that Lucas-Kanade
+    did not reach from the bitmaps' guess (it does from the masked correlation's,
+    :func:`hdrio.align.correlation.masked_ncc_shift`). Measured now: 0.10 and 0.44 px,
+    the longest two refused."""
     case = hand_held_walkers(scene, frames, ev, seed, figure=False)
     result = merge_stack(case.stack(), MergeOptions(deghost="off"))
     alignment = result.motion.alignment
@@ -222,15 +228,17 @@ def test_a_hand_held_ladder_registers_its_darkest_bracket():
     """A hand-held 7 x 2 EV ladder of a scene with a sun, every bracket moved by up to
     6 px and 0.3 deg. The shortest bracket, which alone sees the sun's disc, is now
     registered through its neighbour at codes from 2 % of the range (it was 'not
-    registered: only 0.0 % ... unclipped'); the two longest, clipped at 98-100 % of
-    their pixels, are not, and are merged only where no registered bracket sees the
-    scene (flagged in the motion layer and the header). Measured against the same stack
-    held still, in the reference's frame: median 1.31x, p99 2.28x (the issue's bounds
-    1.3x and 2x: not met, the sun's edge and the city lights); 1.67x and 2.44x until the
-    re-solve's sample was blurred alike; 5.65x and 6.91x before the shortest was
-    registered.
-    Bounds here: every registered bracket within 0.2 px of its true warp at the corners,
-    median 2x and p99 3x."""
+    registered: only 0.0 % ... unclipped'). The second longest, 98 % clipped, is
+    registered from the masked correlation's start (the bitmaps put it 15 px off, and it
+    was refused: 'too few well-exposed edges in common'); the longest, 100 % clipped, is
+    not, and is merged only where no registered bracket sees the scene (flagged in the
+    motion layer and the header). Measured against the same stack held still, in the
+    reference's frame: median 1.29x, p99 2.22x (the issue's bounds 1.3x and 2x; p99 not
+    met, the sun's edge and the city lights: 2.21x with the true warps); 1.31x and 2.28x
+    with the second longest refused; 1.67x and 2.44x until the re-solve's sample was
+    blurred alike; 5.65x and 6.91x before the shortest was registered.
+    Bounds here: every registered bracket within 0.2 px of its true warp at the corners
+    (measured 0.03-0.14 px), median 2x and p99 3x."""
     from hdrio.align.lucaskanade import corner_motion
     from hdrio.job.output import exr_attributes
 
@@ -239,7 +247,7 @@ def test_a_hand_held_ladder_registers_its_darkest_bracket():
     still = merge_stack(held.stack(), MergeOptions())
     alignment = result.motion.alignment
     refused = {j for j, _ in alignment.refused}
-    assert 0 not in refused and refused <= {5, 6}
+    assert refused == {6}, alignment.refused
     height, width = moving.codes.shape[1:3]
     for j in set(range(7)) - refused:
         true = moving.warps[j] @ np.linalg.inv(moving.warps[alignment.reference])
@@ -432,18 +440,30 @@ def test_a_ladders_shortest_bracket_is_registered_on_its_sun(seed):
     assert "by the highlights its neighbour clipped" in lines[0], lines
 
 
-@pytest.mark.parametrize("seed", [2, 4, 5])
-def test_a_hand_held_ladders_median_error_is_within_the_issues_bound(seed):
-    """``hand_held(7, seed)`` against the same stack held still, in the reference's
-    frame: median error at most 1.3x (issue 28). The response re-solved after the warp
-    bent at both ends while the reference was sharp and the warped brackets blurred by
-    their interpolation (the sampler picks a texture's darkest and brightest codes,
-    where a blurred bracket reads nearer the mean): 1.34, 1.35 and 1.58x for these seeds;
-    now every bracket is sampled through the same 3x3 binomial
-    (:func:`hdrio.align.resolve.sampled_stack`), measured 1.25, 1.23 and 1.22x (seeds
-    0-9: 1.22-1.32x). The issue's p99 bound, 2x, is not met (1.95-2.42x): the
-    brackets that could not be registered, and the sun's edge."""
-    moving, held = hand_held(7, seed), hand_held(7, seed, still=True)
+@pytest.mark.parametrize("frames,seed", [(7, 2), (7, 4), (7, 5), (7, 14), (7, 19), (9, 1),
+                                         (9, 5)])
+def test_a_hand_held_ladders_median_error_is_within_the_issues_bound(frames, seed):
+    """``hand_held(frames, seed)`` against the same stack held still, in the reference's
+    frame: median error at most 1.3x (issue 28).
+
+    - The response re-solved after the warp bent at both ends while the reference was
+      sharp and the warped brackets blurred by their interpolation (the sampler picks a
+      texture's darkest and brightest codes, where a blurred bracket reads nearer the
+      mean): 1.34, 1.35 and 1.58x for seeds 2, 4 and 5; every bracket is now sampled
+      through the same 3x3 binomial (:func:`hdrio.align.resolve.sampled_stack`):
+      1.22, 1.22 and 1.22x.
+    - The response was re-solved once, on the first pass's alignment, and the merge
+      read it whatever the second pass found: seed 19's first pass put brackets 0 and 1
+      9.7 px off (its curve up to 0.018 r.m.s. from the truth, the still stack's 0.007), and
+      its merge was 1.70x; seed 14's, 1.48x; the 9-bracket ladders' 2.05 and 3.59x (a
+      blue wave). It is now solved again until the alignment it gives agrees with the
+      one it was solved on (:data:`hdrio.align.registration.RESOLVES`): 1.22, 1.23,
+      1.22 and 1.17x.
+
+    ``hand_held(7)`` over seeds 0-19: 1.19-1.31x (seed 7, 1.31x, is at its floor: 1.31x
+    with the true warps). The issue's p99 bound, 2x, is not met (1.93-2.41x; seeds 0-9
+    with the true warps 1.92-2.21x: the sun's edge and the city lights)."""
+    moving, held = hand_held(frames, seed), hand_held(frames, seed, still=True)
     result = merge_stack(moving.stack(), MergeOptions())
     still = merge_stack(held.stack(), MergeOptions())
     reference = result.motion.alignment.reference
@@ -454,3 +474,18 @@ def test_a_hand_held_ladders_median_error_is_within_the_issues_bound(seed):
     moved = radiance_error(result.radiance, moving.truth_in(reference), inner)["median"]
     base = radiance_error(still.radiance, held.truth_in(reference), inner)["median"]
     assert moved <= 1.3 * base, moved / base
+
+
+def test_the_hand_held_benchmark_measures_against_the_still_stack_and_the_true_warps():
+    """``python -m benchmarks.hand_held``'s rows (docs/motion.md's tables), seed 2: the
+    measured warps' row (median 1.22x the still stack's, the worst registered bracket
+    0.39 px off) and the oracle's with the true warps (0 px by construction; median
+    1.21x: resampling alone). Bounds: the issue's 1.3x for the medians, registration
+    within 0.5 px, and the oracle's warps exact."""
+    from benchmarks.hand_held import measure, seeds_of
+
+    assert seeds_of("0-3") == [0, 1, 2, 3] and seeds_of("1,5") == [1, 5]
+    measured, oracle = measure(7, 2, False), measure(7, 2, True)
+    assert measured["refused"] == oracle["refused"] == [6]
+    assert measured["worst_px"] < 0.5 and oracle["worst_px"] < 1e-9
+    assert measured["median"] <= 1.3 and oracle["median"] <= 1.3, (measured, oracle)

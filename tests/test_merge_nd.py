@@ -132,9 +132,13 @@ def test_a_sun_set_that_moved_keeps_the_sun_its_darkest_frame_alone_reads(
     turned off (``on_highlights`` false: a frame whose highlights do not match) it is
     left unwarped as before. Bounds: the sun within 10 % of the unmoved set's merge
     (measured 0.3-0.9 %; 1.1 % unregistered, its cell flagged); the sun's cells and their
-    neighbours (16 x 16 px) within 30 % of it everywhere and 5 % at the 99th percentile
-    (measured 12.5 % and 2.5 %, the moved brackets resampled at the glow's steep edge;
-    21 % and 2.3 % unregistered; 248 % and 199 % with the speckle)."""
+    neighbours (16 x 16 px) within 30 % of it everywhere and 10 % at the 99th percentile
+    (measured 11.2 % and 7.4 %: the moved brackets resampled at the glow's steep edge, and
+    since stop 48 the response solved again on the second pass's warps; 12.5 % and 2.5 %
+    with one solve; 21 % and 2.3 % unregistered; 248 % and 199 % with the speckle); and
+    there, against the scene, within 1.3x the unmoved set's error at the median and the
+    99th percentile (measured 1.6 % and 8.6 % against 1.5 % and 7.4 %; with one solve
+    1.7 % and 8.4 %)."""
     import hdrio.align.registration as registration
     from hdrio.align.deghost import CELL
 
@@ -161,4 +165,13 @@ def test_a_sun_set_that_moved_keeps_the_sun_its_darkest_frame_alone_reads(
         assert result.motion.unregistered[SUN[0].start // CELL, SUN[1].start // CELL]
     around = (slice(8, 24), slice(24, 40))
     off = np.abs(result.radiance[around] / still.radiance[around] - 1)
-    assert off.max() < 0.3 and np.percentile(off, 99) < 0.05, (off.max(), np.percentile(off, 99))
+    assert off.max() < 0.3 and np.percentile(off, 99) < 0.1, (off.max(), np.percentile(off, 99))
+    truth = sun_scene()
+
+    def error(radiance):  # in the same cells, against the scene after one global scale
+        radiance = radiance.astype(np.float64)
+        scale = np.exp(np.median(np.log(truth / np.maximum(radiance, 1e-12))))
+        return np.percentile(np.abs(scale * radiance[around] / truth[around] - 1), [50, 99])
+
+    assert np.all(error(result.radiance) <= 1.3 * error(still.radiance)), (
+        error(result.radiance), error(still.radiance))

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hdrio.align.correlation import correlate, sub_pixel, translation, within_reach
+
 MIN_PIXELS = 16
 """Base pixels the clipped region must hold in each bracket to be matched."""
 
@@ -35,29 +37,12 @@ def highlight_shift(clipped: np.ndarray, bright: np.ndarray) -> np.ndarray | Non
     a, b = clipped.astype(np.float64), bright.astype(np.float64)
     if min(a.sum(), b.sum()) < MIN_PIXELS:
         return None
-    height, width = a.shape
-    shape = (2 * height, 2 * width)  # zero-padded: no wrap-around
+    shape = (2 * a.shape[0], 2 * a.shape[1])  # zero-padded: no wrap-around
     # C(d) = sum_x a(x) b(x + d): the peak is where b's region sits relative to a's.
-    c = np.fft.irfft2(np.conj(np.fft.rfft2(a, shape)) * np.fft.rfft2(b, shape), shape)
-    dy = np.fft.fftfreq(shape[0], 1.0 / shape[0]).astype(int)
-    dx = np.fft.fftfreq(shape[1], 1.0 / shape[1]).astype(int)
-    reach = (np.abs(dy)[:, None] <= MAX_SHIFT) & (np.abs(dx)[None, :] <= MAX_SHIFT)
-    c = np.where(reach, c, -np.inf)
+    c = within_reach(correlate(a, b, shape), MAX_SHIFT)
     py, px = np.unravel_index(int(np.argmax(c)), c.shape)
     overlap = c[py, px]
     if not overlap / (a.sum() + b.sum() - overlap) >= MIN_OVERLAP:
         return None
-    sy = dy[py] + _vertex(c[(py - 1) % shape[0], px], overlap, c[(py + 1) % shape[0], px])
-    sx = dx[px] + _vertex(c[py, (px - 1) % shape[1]], overlap, c[py, (px + 1) % shape[1]])
-    return np.array([[1.0, 0.0, sx], [0.0, 1.0, sy], [0.0, 0.0, 1.0]])
-
-
-def _vertex(before: float, peak: float, after: float) -> float:
-    """The parabola's vertex through three equally spaced values, relative to the middle
-    one (within half a step)."""
-    if not (np.isfinite(before) and np.isfinite(after)):
-        return 0.0
-    curvature = before - 2.0 * peak + after
-    if curvature >= 0.0:
-        return 0.0
-    return float(np.clip(0.5 * (before - after) / curvature, -0.5, 0.5))
+    sy, sx = sub_pixel(c, py, px)
+    return translation(sx, sy)

@@ -177,6 +177,28 @@ def strongest(reference: np.ndarray, ref_valid: np.ndarray, points: int = POINTS
     return index
 
 
+def usable_under(ref_valid: np.ndarray, moving: np.ndarray, mov_valid: np.ndarray,
+                 warps) -> np.ndarray:
+    """``ref_valid`` less the pixels where the moving image is not usable under some of
+    ``warps`` (:func:`residuals`' test): where those warps can be compared. Its
+    strongest gradients are the points to compare them on (:func:`strongest`); those of
+    ``ref_valid`` alone can all lie where the moving bracket clips (a longer bracket
+    beside the edges of a bright sky)."""
+    h, w = ref_valid.shape
+    index = np.flatnonzero(ref_valid)
+    py, px = np.divmod(index, w)
+    px, py = px.astype(np.float64), py.astype(np.float64)
+    values = np.empty(index.size)
+    good = np.empty(index.size, np.bool_)
+    out = np.zeros(h * w, np.bool_)
+    out[index] = True
+    for warp in warps:
+        mx, my = _apply(warp, px, py)
+        _sample(moving, mov_valid, mx, my, values, good)
+        out[index] &= good
+    return out.reshape(h, w)
+
+
 def residuals(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
               mov_valid: np.ndarray, warps, points: int = POINTS,
               index: np.ndarray | None = None) -> list[float]:
