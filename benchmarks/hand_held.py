@@ -9,6 +9,11 @@ registered brackets (px, against their true warps) and the brackets refused.
 ``--true-warps`` is an oracle: every measured warp is replaced by the true one (the
 refusals stand), which shows what resampling alone costs. Prints a table and writes
 ``benchmarks/results/hand_held.json``.
+
+``python -m benchmarks.hand_held --registration [--seeds 0-3]``: registration alone
+(deghosting off) on :func:`tests.hard_cases.hand_held_walkers`' JPEG ladders without the
+figure (GoldenGate, StillLife, MtTamWest and Desk, 5 and 7 x 2 EV): per ladder and seed,
+the worst corner error of the registered brackets and the brackets refused.
 """
 
 from __future__ import annotations
@@ -86,13 +91,53 @@ def measure(frames: int, seed: int, true_warps: bool) -> dict:
             "p99": moved["p99"] / base["p99"], "worst_px": max(errors), "refused": refused}
 
 
+LADDERS = (("GoldenGate", 7), ("StillLife", 5), ("StillLife", 7), ("MtTamWest", 7),
+           ("Desk", 7))
+"""The walker ladders :func:`registration` measures (scene, brackets; 2 EV apart)."""
+
+
+def registration(seeds: list[int], ladders=LADDERS) -> list[dict]:
+    """Per ladder (``(scene, brackets)``, :data:`LADDERS`) and seed: the worst registered
+    bracket's corner error (px) and the brackets refused."""
+    from hdrio.align.lucaskanade import corner_motion
+    from hdrio.job.options import MergeOptions
+    from hdrio.job.run import merge_stack
+    from tests.hard_cases import hand_held_walkers
+
+    rows = []
+    for scene, frames in ladders:
+        for seed in seeds:
+            case = hand_held_walkers(scene, frames, 2.0, seed, figure=False)
+            alignment = merge_stack(case.stack(), MergeOptions(deghost="off")).motion.alignment
+            height, width = case.codes.shape[1:3]
+            refused = sorted(j for j, _ in alignment.refused)
+            reference = np.linalg.inv(case.warps[alignment.reference])
+            errors = [corner_motion(np.linalg.inv(case.warps[j] @ reference)
+                                    @ alignment.transforms[j], height, width)
+                      for j in range(frames) if j not in refused]
+            rows.append({"scene": scene, "frames": frames, "seed": seed,
+                         "worst_px": max(errors), "refused": refused})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=7)
     parser.add_argument("--seeds", default="0-19")
     parser.add_argument("--true-warps", action="store_true")
+    parser.add_argument("--registration", action="store_true")
     parser.add_argument("--json", default="benchmarks/results/hand_held.json")
     args = parser.parse_args(argv)
+    if args.registration:
+        rows = registration(seeds_of(args.seeds))
+        print("walker ladders without the figure (JPEG, 2 EV): worst registered bracket "
+              "(px), brackets refused")
+        for row in rows:
+            print(f"{row['scene']} {row['frames']} seed {row['seed']}: "
+                  f"{row['worst_px']:.2f} {row['refused']}")
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps({"registration": rows}, indent=1))
+        return 0
     rows = [measure(args.frames, seed, args.true_warps) for seed in seeds_of(args.seeds)]
     print(f"hand_held({args.frames}){' with the true warps' if args.true_warps else ''}: "
           "error over the still stack's (bounds: median 1.3x, p99 2x)")
