@@ -385,9 +385,10 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
     (:func:`_judged`): ``(warp, None)``, the identity when the warp fits no better than
     no motion, or ``(identity, why)`` when it cannot be trusted.
 
-    Lucas-Kanade refines two starts: the median-threshold bitmaps' shift, and the shift
-    that correlates the two brackets' log radiance best where both are usable
-    (:func:`hdrio.align.correlation.masked_ncc_shift`); the warp that fits better on
+    Lucas-Kanade refines the median-threshold bitmaps' shift; where that warp is not
+    clearly right (:data:`CLEAR`) it refines a second start too, the shift that
+    correlates the two brackets' log radiance best where both are usable
+    (:func:`hdrio.align.correlation.masked_ncc_shift`), and the warp that fits better on
     the same points is judged. Either start alone fails somewhere: a bracket clipped
     over most of the frame thresholds its bitmap at the clip (the second longest of a
     hand-held 7 x 2 EV ladder with a sky, 98 % of it clipped: the bitmaps put it 15 px
@@ -396,15 +397,18 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
     dx, dy = align_Ward2003(base_k.grey, base_j.grey, MTB_LEVELS, code_max)
     step = refine_LucasKanade(pyramid_k, pyramid_j, translation(dx, dy), model)
     warp, why, ratio = _judged(pyramid_k, pyramid_j, step)
-    if why is None and ratio <= CLEAR:
-        return warp, why
+    shape = pyramid_k[0][0].shape
     level = next((k for k, (image, _) in enumerate(pyramid_k) if image.size <= NCC_PIXELS),
                  len(pyramid_k) - 1)
+    if why is None and (ratio <= CLEAR or corner_motion(step, *shape) <= 2.0**level):
+        # Clearly right; or no motion, the refinement within a pixel of the level the
+        # correlation reads in whole pixels (it cannot start anywhere nearer).
+        return warp, why
     guess = masked_ncc_shift(*pyramid_k[level], *pyramid_j[level], MAX_SHIFT >> level)
     if guess is None:
         return warp, why
     guess = rescale(guess, 2.0**level)
-    if corner_motion(np.linalg.inv(guess) @ step, *pyramid_k[0][0].shape) <= 2.0**level:
+    if corner_motion(np.linalg.inv(guess) @ step, *shape) <= 2.0**level:
         return warp, why  # the same start, to within a pixel of its level
     other = refine_LucasKanade(pyramid_k, pyramid_j, guess, model)
     return _judged(pyramid_k, pyramid_j, _better(pyramid_k, pyramid_j, step, other))[:2]
