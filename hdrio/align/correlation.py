@@ -60,11 +60,11 @@ def sub_pixel(c: np.ndarray, py: int, px: int) -> tuple[float, float]:
     its neighbours each way."""
     dy, dx = shifts(c.shape)
     peak = c[py, px]
-    return (dy[py] + vertex(c[(py - 1) % c.shape[0], px], peak, c[(py + 1) % c.shape[0], px]),
-            dx[px] + vertex(c[py, (px - 1) % c.shape[1]], peak, c[py, (px + 1) % c.shape[1]]))
+    return (dy[py] + _vertex(c[(py - 1) % c.shape[0], px], peak, c[(py + 1) % c.shape[0], px]),
+            dx[px] + _vertex(c[py, (px - 1) % c.shape[1]], peak, c[py, (px + 1) % c.shape[1]]))
 
 
-def vertex(before: float, peak: float, after: float) -> float:
+def _vertex(before: float, peak: float, after: float) -> float:
     """The parabola's vertex through three equally spaced values, relative to the middle
     one (within half a step)."""
     if not (np.isfinite(before) and np.isfinite(after)):
