@@ -7,7 +7,9 @@ still, the radiance error in the reference's frame over the well-exposed pixels 
 border left out), median and p99 over the still stack's; the worst corner error of the
 registered brackets (px, against their true warps) and the brackets refused.
 ``--true-warps`` is an oracle: every measured warp is replaced by the true one (the
-refusals stand), which shows what resampling alone costs. Prints a table and writes
+refusals stand), which shows what resampling alone costs. ``--lens SIGMA`` blurs every
+view by a lens's point spread before capture (the generator's default has none: edges
+sharper than any lens gives). Prints a table and writes
 ``benchmarks/results/hand_held.json``.
 
 ``python -m benchmarks.hand_held --registration [--seeds 0-3]``: registration alone
@@ -62,8 +64,8 @@ def with_true_warps(case):
     return patched()
 
 
-def measure(frames: int, seed: int, true_warps: bool) -> dict:
-    """One seed's row."""
+def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict:
+    """One seed's row (``lens``: :func:`tests.hard_cases.hand_held`'s point spread)."""
     import contextlib
 
     from hdrio.align.lucaskanade import corner_motion
@@ -72,7 +74,8 @@ def measure(frames: int, seed: int, true_warps: bool) -> dict:
     from hdrio.tools.synthetic import radiance_error, well_exposed
     from tests.hard_cases import hand_held
 
-    moving, held = hand_held(frames, seed), hand_held(frames, seed, still=True)
+    moving = hand_held(frames, seed, lens=lens)
+    held = hand_held(frames, seed, still=True, lens=lens)
     with with_true_warps(moving) if true_warps else contextlib.nullcontext():
         result = merge_stack(moving.stack(), MergeOptions())
     still = merge_stack(held.stack(), MergeOptions())
@@ -125,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=7)
     parser.add_argument("--seeds", default="0-19")
     parser.add_argument("--true-warps", action="store_true")
+    parser.add_argument("--lens", type=float, default=0.0,
+                        help="a Gaussian point spread (px) on every view, as a lens gives")
     parser.add_argument("--registration", action="store_true")
     parser.add_argument("--json", default="benchmarks/results/hand_held.json")
     args = parser.parse_args(argv)
@@ -138,8 +143,10 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps({"registration": rows}, indent=1))
         return 0
-    rows = [measure(args.frames, seed, args.true_warps) for seed in seeds_of(args.seeds)]
-    print(f"hand_held({args.frames}){' with the true warps' if args.true_warps else ''}: "
+    rows = [measure(args.frames, seed, args.true_warps, args.lens)
+            for seed in seeds_of(args.seeds)]
+    print(f"hand_held({args.frames}{f', lens={args.lens:g}' if args.lens else ''})"
+          f"{' with the true warps' if args.true_warps else ''}: "
           "error over the still stack's (bounds: median 1.3x, p99 2x)")
     print("seed | median | p99 | worst registered bracket (px) | refused")
     for row in rows:
@@ -151,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"frames": args.frames, "true_warps": args.true_warps,
-                               "rows": rows}, indent=1))
+                               "lens": args.lens, "rows": rows}, indent=1))
     return 0
 
 

@@ -198,9 +198,15 @@ def add_sun(radiance: np.ndarray, where=(0.2, 0.8), size: float = 3.0,
 
 def hand_held(frames: int = 7, seed: int = 0, height: int = 200, width: int = 300,
               scene: str = "GoldenGate", shift: float = 6.0, degrees: float = 0.3,
-              still: bool = False) -> HardCase:
+              still: bool = False, lens: float = 0.0) -> HardCase:
     """A hand-held ladder, 2 EV apart, with a sun: every bracket moved by up to
-    ``shift`` px and ``degrees`` (``still``: the same stack on a tripod)."""
+    ``shift`` px and ``degrees`` (``still``: the same stack on a tripod).
+
+    ``lens``: the standard deviation (pixels) of a Gaussian point spread function each
+    bracket's view is blurred by before it is captured, as a lens and an anti-aliasing
+    filter blur what reaches the sensor (the truth is the blurred view). 0, the default,
+    keeps edges as sharp as the 2x2 area average of the supersampled scene: sharper than
+    any lens gives, the hardest case for resampling."""
     from tests.align_truth import SUPER, euclidean, view
     from tests.align_truth import scene_crop as crop
 
@@ -211,10 +217,12 @@ def hand_held(frames: int = 7, seed: int = 0, height: int = 200, width: int = 30
                                               rng.uniform(-degrees, degrees), height, width)
              for _ in range(frames)]
     scenes = [view(hi, w).astype(np.float64) for w in warps]
+    if lens > 0:
+        scenes = [scipy.ndimage.gaussian_filter(s, (lens, lens, 0)) for s in scenes]
     camera = Camera(encoding="png")
     exposures = ladder(view(hi, np.eye(3)), frames)
-    return _render(f"handheld{frames}_{seed}{'_still' if still else ''}", scenes,
-                   exposures, camera, seed, warps)
+    return _render(f"handheld{frames}_{seed}{'_still' if still else ''}"
+                   f"{f'_lens{lens:g}' if lens else ''}", scenes, exposures, camera, seed, warps)
 
 
 def movers(crossing: int = 2, bright: bool = True, large: bool = True, frames: int = 5,
