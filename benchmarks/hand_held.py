@@ -68,7 +68,6 @@ def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict
     """One seed's row (``lens``: :func:`tests.hard_cases.hand_held`'s point spread)."""
     import contextlib
 
-    from hdrio.align.lucaskanade import corner_motion
     from hdrio.job.options import MergeOptions
     from hdrio.job.run import merge_stack
     from hdrio.tools.synthetic import radiance_error, well_exposed
@@ -87,9 +86,7 @@ def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict
     moved = radiance_error(result.radiance, moving.truth_in(alignment.reference), inner)
     base = radiance_error(still.radiance, held.truth_in(alignment.reference), inner)
     refused = sorted(j for j, _ in alignment.refused)
-    errors = [corner_motion(np.linalg.inv(moving.warps[j] @ np.linalg.inv(
-        moving.warps[alignment.reference])) @ alignment.transforms[j], height, width)
-        for j in range(frames) if j not in refused]
+    errors = [e for j, e in enumerate(moving.corner_errors(alignment)) if j not in refused]
     return {"seed": seed, "median": moved["median"] / base["median"],
             "p99": moved["p99"] / base["p99"], "worst_px": max(errors), "refused": refused}
 
@@ -102,7 +99,6 @@ LADDERS = (("GoldenGate", 7), ("StillLife", 5), ("StillLife", 7), ("MtTamWest", 
 def registration(seeds: list[int], ladders=LADDERS) -> list[dict]:
     """Per ladder (``(scene, brackets)``, :data:`LADDERS`) and seed: the worst registered
     bracket's corner error (px) and the brackets refused."""
-    from hdrio.align.lucaskanade import corner_motion
     from hdrio.job.options import MergeOptions
     from hdrio.job.run import merge_stack
     from tests.hard_cases import hand_held_walkers
@@ -112,12 +108,9 @@ def registration(seeds: list[int], ladders=LADDERS) -> list[dict]:
         for seed in seeds:
             case = hand_held_walkers(scene, frames, 2.0, seed, figure=False)
             alignment = merge_stack(case.stack(), MergeOptions(deghost="off")).motion.alignment
-            height, width = case.codes.shape[1:3]
             refused = sorted(j for j, _ in alignment.refused)
-            reference = np.linalg.inv(case.warps[alignment.reference])
-            errors = [corner_motion(np.linalg.inv(case.warps[j] @ reference)
-                                    @ alignment.transforms[j], height, width)
-                      for j in range(frames) if j not in refused]
+            errors = [e for j, e in enumerate(case.corner_errors(alignment))
+                      if j not in refused]
             rows.append({"scene": scene, "frames": frames, "seed": seed,
                          "worst_px": max(errors), "refused": refused})
     return rows

@@ -112,6 +112,17 @@ class HardCase:
         return ExposureStack.from_arrays(self.codes, self.exposures, files=files,
                                          code_max=self.camera.code_max)
 
+    def corner_errors(self, alignment) -> list[float]:
+        """Each bracket's measured warp (``alignment``:
+        :class:`hdrio.align.registration.Alignment`) against its true one: how far it
+        moves a corner of the image (px)."""
+        from hdrio.align.lucaskanade import corner_motion
+
+        height, width = self.codes.shape[1:3]
+        inverse = np.linalg.inv(self.warps[alignment.reference])
+        return [corner_motion(np.linalg.inv(warp @ inverse) @ measured, height, width)
+                for warp, measured in zip(self.warps, alignment.transforms)]
+
     def truth_in(self, reference: int) -> np.ndarray:
         """The still scene in bracket ``reference``'s frame (``(H, W, 3)``)."""
         return self.scenes[reference] if self.background is None else self.background

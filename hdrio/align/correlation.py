@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hdrio.align.lucaskanade import translation
+
 NCC_PIXELS = 2**17
 """The pyramid level :func:`masked_ncc_shift` is run on: the finest with at most this many
 pixels (at 24 MP the base is 1500x1000 and the level 375x250)."""
@@ -73,11 +75,6 @@ def _vertex(before: float, peak: float, after: float) -> float:
     if curvature >= 0.0:
         return 0.0
     return float(np.clip(0.5 * (before - after) / curvature, -0.5, 0.5))
-
-
-def translation(dx: float, dy: float) -> np.ndarray:
-    """The 3x3 warp ``x -> x + (dx, dy)``."""
-    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
 
 
 def masked_ncc_shift(fixed: np.ndarray, fixed_valid: np.ndarray, moving: np.ndarray,

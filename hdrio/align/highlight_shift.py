@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdrio.align.correlation import correlate, sub_pixel, translation, within_reach
+from hdrio.align.correlation import correlate, sub_pixel, within_reach
+from hdrio.align.lucaskanade import translation
 
 MIN_PIXELS = 16
 """Base pixels the clipped region must hold in each bracket to be matched."""

@@ -57,9 +57,14 @@ def rescale(warp: np.ndarray, factor: float) -> np.ndarray:
     return a @ warp @ np.linalg.inv(a)
 
 
+def translation(dx: float, dy: float) -> np.ndarray:
+    """The 3x3 warp ``x -> x + (dx, dy)``."""
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
 def _update(model: str, delta: np.ndarray) -> np.ndarray:
     if model == "translation":
-        return np.array([[1.0, 0.0, delta[0]], [0.0, 1.0, delta[1]], [0.0, 0.0, 1.0]])
+        return translation(delta[0], delta[1])
     if model == "euclidean":
         c, s = np.cos(delta[2]), np.sin(delta[2])
         return np.array([[c, -s, delta[0]], [s, c, delta[1]], [0.0, 0.0, 1.0]])
@@ -177,26 +182,21 @@ def strongest(reference: np.ndarray, ref_valid: np.ndarray, points: int = POINTS
     return index
 
 
-def usable_under(ref_valid: np.ndarray, moving: np.ndarray, mov_valid: np.ndarray,
-                 warps) -> np.ndarray:
-    """``ref_valid`` less the pixels where the moving image is not usable under some of
-    ``warps`` (:func:`residuals`' test): where those warps can be compared. Its
-    strongest gradients are the points to compare them on (:func:`strongest`); those of
-    ``ref_valid`` alone can all lie where the moving bracket clips (a longer bracket
-    beside the edges of a bright sky)."""
-    h, w = ref_valid.shape
+def strongest_usable(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,
+                     mov_valid: np.ndarray, warp: np.ndarray, points: int = POINTS
+                     ) -> np.ndarray:
+    """:func:`strongest` among the pixels of ``ref_valid`` where the moving image is usable
+    under ``warp`` (:func:`residuals`' test): the points to measure that warp's misfit on
+    alone, where those of ``ref_valid`` could all lie where the moving bracket clips (a
+    longer bracket beside the edges of a bright sky)."""
     index = np.flatnonzero(ref_valid)
-    py, px = np.divmod(index, w)
-    px, py = px.astype(np.float64), py.astype(np.float64)
-    values = np.empty(index.size)
+    py, px = np.divmod(index, ref_valid.shape[1])
+    mx, my = _apply(warp, px.astype(np.float64), py.astype(np.float64))
     good = np.empty(index.size, np.bool_)
-    out = np.zeros(h * w, np.bool_)
-    out[index] = True
-    for warp in warps:
-        mx, my = _apply(warp, px, py)
-        _sample(moving, mov_valid, mx, my, values, good)
-        out[index] &= good
-    return out.reshape(h, w)
+    _sample(moving, mov_valid, mx, my, np.empty(index.size), good)
+    usable = np.zeros(ref_valid.size, np.bool_)
+    usable[index[good]] = True
+    return strongest(reference, usable.reshape(ref_valid.shape), points)
 
 
 def residuals(reference: np.ndarray, ref_valid: np.ndarray, moving: np.ndarray,

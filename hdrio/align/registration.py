@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hdrio.align.correlation import NCC_PIXELS, masked_ncc_shift, translation
+from hdrio.align.correlation import NCC_PIXELS, masked_ncc_shift
 from hdrio.align.highlight_shift import MAX_SHIFT, highlight_shift
 from hdrio.align.lucaskanade import (
     MIN_POINTS,
@@ -33,7 +33,8 @@ from hdrio.align.lucaskanade import (
     rescale,
     residuals,
     strongest,
-    usable_under,
+    strongest_usable,
+    translation,
 )
 from hdrio.align.pyramid import (
     REGISTRABLE,
@@ -420,9 +421,8 @@ def _better(pyramid_k, pyramid_j, first: np.ndarray, second: np.ndarray) -> np.n
     fine_k, fine_j = pyramid_k[0], pyramid_j[0]
     misfits = residuals(*fine_k, *fine_j, [first, second], index=_judging_points(fine_k))
     if not np.all(np.isfinite(misfits)):
-        misfits = [residuals(*fine_k, *fine_j, [warp], index=strongest(
-            fine_k[0], usable_under(fine_k[1], *fine_j, [warp])))[0]
-            for warp in (first, second)]
+        misfits = [residuals(*fine_k, *fine_j, [warp], index=strongest_usable(
+            *fine_k, *fine_j, warp))[0] for warp in (first, second)]
     return second if misfits[1] < misfits[0] else first
 
 
@@ -453,7 +453,7 @@ def _judged(pyramid_k, pyramid_j, step: np.ndarray) -> tuple[np.ndarray, str | N
         # moved by more than their size): each misfit over the points its warp keeps.
         # No motion keeps the easier ones (see residuals): a shift that fits clearly
         # better all the same is real, and one that does not is not judged.
-        points = strongest(fine_k[0], usable_under(fine_k[1], *fine_j, [step]))
+        points = strongest_usable(*fine_k, *fine_j, step)
         moved = residuals(*fine_k, *fine_j, [step], index=points)[0]
         unmoved = residuals(*fine_k, *fine_j, [still])[0]
     if corner_motion(step, *fine_k[0].shape) > 0 and not _textured(fine_k[0], points):
