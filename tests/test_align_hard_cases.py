@@ -392,16 +392,18 @@ def test_a_nine_bracket_hand_held_ladder_is_registered_or_refused(seed):
     assert all(why.startswith("only ") for _, why in alignment.refused), alignment.refused
 
 
-@pytest.mark.parametrize("seed", [1, 3])
+@pytest.mark.parametrize("seed", [1, 3, 4])
 def test_a_ladders_shortest_bracket_is_registered_on_its_sun(seed):
     """``hand_held(9, seed)``: the shortest bracket sees only the sun (0.4 % of it usable
     where its neighbour is, 0.5 % needed), and was left unwarped, 3-6 px off. Deghosting
     then dropped it as moving where its displaced disc showed sky inside the true sun
     (5.5-5.9 % of a still scene "deghosted"), and the sun's 60 brightest pixels came out
     at 0.092 and 0.007 of the truth. Now it is registered by the sun its neighbour
-    clipped (:mod:`hdrio.align.highlight_shift`): 0.17 and 0.02 px off at the sun,
-    nothing deghosted, the sun at 1.07 and 0.90 of the truth (the still stack's merge:
-    0.91), said in the summary and the header. Bounds: 0.5 px at the sun; 0.7-1.3."""
+    clipped (:mod:`hdrio.align.highlight_shift`), nothing deghosted, the sun at 0.86-0.90
+    of the truth (the still stack's merge: 0.91), said in the summary and the header.
+    At the sun's brightest pixel the masks' correlation alone left it 0.15, 0.05 and 0.16
+    px off; refined by the highlights' centroids, 0.050, 0.037 and 0.028 px. Bounds: 0.1
+    px at the sun; 0.7-1.3."""
     from hdrio.job.output import exr_attributes
 
     case = hand_held(9, seed)
@@ -413,7 +415,7 @@ def test_a_ladders_shortest_bracket_is_registered_on_its_sun(seed):
     y, x = np.unravel_index(int(np.argmax(brightness)), brightness.shape)
     true = case.warps[0] @ np.linalg.inv(case.warps[alignment.reference])
     measured, expected = alignment.transforms[0] @ [x, y, 1.0], true @ [x, y, 1.0]
-    assert np.hypot(*(measured[:2] / measured[2] - expected[:2] / expected[2])) < 0.5
+    assert np.hypot(*(measured[:2] / measured[2] - expected[:2] / expected[2])) < 0.1
     assert result.motion.deghosting.fraction == 0.0
     radiance = result.radiance.astype(np.float64)
     scale = np.exp(np.median(np.log(truth / np.maximum(radiance, 1e-12))))
@@ -479,17 +481,21 @@ def test_the_hand_held_benchmark_measures_against_the_still_stack_and_the_true_w
     assert row["worst_px"] < 0.5 and row["refused"] == [5, 6], row
 
 
-@pytest.mark.parametrize("seed", [2, 5])
-def test_a_hand_held_ladder_through_a_lens_is_within_both_of_the_issues_bounds(seed):
-    """``hand_held(7, seed, lens=0.5)``: the same ladder with every view blurred by a
+@pytest.mark.parametrize("frames,seed", [(7, 2), (7, 5), (9, 4)])
+def test_a_hand_held_ladder_through_a_lens_is_within_both_of_the_issues_bounds(frames, seed):
+    """``hand_held(frames, seed, lens=0.5)``: the same ladder with every view blurred by a
     Gaussian point spread of 0.5 px before capture, as a lens and an anti-aliasing filter
     blur what reaches a sensor (the generator's default has none, and its edges are
     sharper than any lens gives: there resampling alone costs p99 1.92-2.21x the still
     stack's). Against the same stack held still (through the same lens): median at most
-    1.3x and p99 at most 2x, the issue's bounds. Measured: 1.05x / 1.74x and 1.04x /
-    1.75x (`python -m benchmarks.hand_held --lens 0.5`, seeds 0-19: medians 1.04-1.15x,
-    p99 1.74-2.12x, 19 of 20 within 2x)."""
+    1.3x and p99 at most 2x, the issue's bounds. Measured: 1.05x / 1.74x, 1.04x / 1.75x
+    and 1.07x / 1.75x (`python -m benchmarks.hand_held --lens 0.5`, seeds 0-19: medians
+    1.04-1.15x, p99 1.74-2.12x, 19 of 20 within 2x; ``--frames 9``, seeds 0-9: medians
+    1.03-1.11x, p99 1.71-1.98x, 10 of 10). ``hand_held(9, 4)`` was at p99 2.10x while its
+    shortest bracket, registered by its sun alone, sat 0.19 px off there (the masks'
+    correlation; 0.03 px refined by the sun's centroid,
+    :func:`hdrio.align.highlight_shift.refine_by_centroids`)."""
     from benchmarks.hand_held import measure
 
-    row = measure(7, seed, False, lens=0.5)
+    row = measure(frames, seed, False, lens=0.5)
     assert row["median"] <= 1.3 and row["p99"] <= 2.0, row

@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hdrio.align.correlation import NCC_PIXELS, masked_ncc_shift
-from hdrio.align.highlight_shift import MAX_SHIFT, highlight_shift
+from hdrio.align.highlight_shift import MAX_SHIFT, highlight_shift, refine_by_centroids
 from hdrio.align.lucaskanade import (
     MIN_POINTS,
     POINTS,
@@ -305,9 +305,13 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
         measured on the highlights ``k`` clipped."""
         why = unusable(bases[k].valid, bases[j].valid)
         if why is not None and j < k:  # a shorter one: by the highlights k clipped
-            step = highlight_shift(bases[k].grey >= top, bases[j].log >= float(
-                np.log(linear[k][:, top].sum())))
-            return (np.eye(3), why, False) if step is None else (step, None, True)
+            level = float(np.log(linear[k][:, top].sum()))
+            clipped = bases[k].grey >= top
+            step = highlight_shift(clipped, bases[j].log >= level)
+            if step is None:
+                return np.eye(3), why, False
+            return refine_by_centroids(step, bases[k].log, bases[k].valid, clipped,
+                                       bases[j].log, bases[j].valid, level), None, True
         if why is not None:
             return np.eye(3), why, False
         with pyramids.held(k) as pyramid_k, pyramids.held(j) as pyramid_j:
