@@ -50,6 +50,36 @@ def highlight_shift(clipped: np.ndarray, bright: np.ndarray) -> np.ndarray | Non
     return translation(sx, sy)
 
 
+def channel_clip_regions(codes_k: np.ndarray, codes_j: np.ndarray, top: int,
+                         factor: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`highlight_shift`'s two regions read in one channel, at base resolution
+    (``factor`` full-resolution pixels a side, a base pixel set where any of its pixels
+    is): the neighbour's pixels (``codes_k``, ``(H, W, C)``) at or above ``top`` in that
+    channel, and as many of the shorter bracket's (``codes_j``), its brightest in that
+    channel. A response is monotone, so those are the same pixels of a still scene,
+    whatever the curve says near the top (the re-solved curve's estimates there moved
+    the shorter bracket's region by half again). The channel is the one the neighbour
+    clips least, of those it clips at :data:`MIN_PIXELS` base pixels or more: in a warm
+    interior the long brackets' red is clipped nearly everywhere, and their blue draws
+    the shapes. ``None`` when none is."""
+    height, width = codes_k.shape[0] // factor, codes_k.shape[1] // factor
+
+    def blocks(mask: np.ndarray) -> np.ndarray:
+        mask = mask[:height * factor, :width * factor]
+        return mask.reshape(height, factor, width, factor).any(axis=(1, 3))
+
+    best, fewest = None, None
+    for c in range(codes_k.shape[-1]):
+        count = int(np.count_nonzero(codes_k[..., c] >= top))
+        if count >= MIN_PIXELS * factor * factor and (fewest is None or count < fewest):
+            best, fewest = c, count
+    if best is None:
+        return None
+    values = codes_j[..., best].reshape(-1)
+    level = np.partition(values, values.size - fewest)[values.size - fewest]
+    return blocks(codes_k[..., best] >= top), blocks(codes_j[..., best] >= level)
+
+
 FLOOR = 0.5
 """:func:`refine_by_centroids` weighs the radiance above this fraction of the clip level:
 there the shorter bracket is well exposed (2 EV shorter, at an eighth of its range)."""
