@@ -57,8 +57,8 @@ def channel_clip_regions(codes_k: np.ndarray, codes_j: np.ndarray, top: int,
     is): the neighbour's pixels (``codes_k``, ``(H, W, C)``) at or above ``top`` in that
     channel, and as many of the shorter bracket's (``codes_j``), its brightest in that
     channel. A response is monotone, so those are the same pixels of a still scene,
-    whatever the curve says near the top (the re-solved curve's estimates there moved
-    the shorter bracket's region by half again). The channel is the one the neighbour
+    whatever the curve says near the top (read through the re-solved curve, the shorter
+    bracket's region came out 1.5-1.8x the neighbour's). The channel is the one the neighbour
     clips least, of those it clips at :data:`MIN_PIXELS` base pixels or more: in a warm
     interior the long brackets' red is clipped nearly everywhere, and their blue draws
     the shapes. ``None`` when none is."""
