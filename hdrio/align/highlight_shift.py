@@ -68,16 +68,17 @@ def channel_clip_regions(codes_k: np.ndarray, codes_j: np.ndarray, top: int,
         mask = mask[:height * factor, :width * factor]
         return mask.reshape(height, factor, width, factor).any(axis=(1, 3))
 
-    best, fewest = None, None
+    best, clipped, fewest = None, None, 0
     for c in range(codes_k.shape[-1]):
-        count = int(np.count_nonzero(codes_k[..., c] >= top))
-        if count >= MIN_PIXELS * factor * factor and (fewest is None or count < fewest):
-            best, fewest = c, count
-    if best is None:
+        at_top = codes_k[..., c] >= top
+        count = int(np.count_nonzero(at_top))
+        if count >= MIN_PIXELS * factor * factor and (clipped is None or count < fewest):
+            best, clipped, fewest = c, at_top, count
+    if clipped is None:
         return None
     values = codes_j[..., best].reshape(-1)
     level = np.partition(values, values.size - fewest)[values.size - fewest]
-    return blocks(codes_k[..., best] >= top), blocks(codes_j[..., best] >= level)
+    return blocks(clipped), blocks(codes_j[..., best] >= level)
 
 
 FLOOR = 0.5

@@ -448,12 +448,11 @@ def _register_pair(pyramid_k, pyramid_j, base_k: BaseImage, base_j: BaseImage,
         # dark bracket (StillLife's 7-bracket ladder, the second shortest) it was
         # within 0.2 px, and the refinement walked 1-10 px off, fitting worse.
         starts += [shift, refine_LucasKanade(pyramid_k, pyramid_j, shift, model)]
-    if len(starts) == 1 and shift is None:
-        return warp, why  # no other start, or the same one to within a pixel of its level
     best = starts[0]
-    for other in starts[1:]:
-        best = _better(pyramid_k, pyramid_j, best, other)
-    warp, why, _ = _judged(pyramid_k, pyramid_j, best)
+    if len(starts) > 1:  # else the first start, judged above
+        for other in starts[1:]:
+            best = _better(pyramid_k, pyramid_j, best, other)
+        warp, why, _ = _judged(pyramid_k, pyramid_j, best)
     if (shift is not None and best is not shift and (why is not None or warp is not best)
             and _agree_at_centre(best, shift, shape)):
         # The edges could not tell (too few in common to judge, or no better than no
