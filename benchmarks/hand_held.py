@@ -45,8 +45,8 @@ def with_true_warps(case):
 
     measure = registration.estimate_alignment
 
-    def truth(stack, response, model="euclidean"):
-        alignment = measure(stack, response, model)
+    def truth(stack, response, model="euclidean", excluded=None):
+        alignment = measure(stack, response, model, excluded)
         inverse = np.linalg.inv(case.warps[alignment.reference])
         transforms = np.stack([warp @ inverse for warp in case.warps])
         height, width = stack.codes.shape[1:3]

@@ -389,6 +389,34 @@ def test_quick_check_allows_for_a_noisy_pair_of_dark_brackets(monkeypatch):
     assert not quick.looks_still(stack.codes, linear, 255, best)[0]
 
 
+def test_quick_check_does_not_read_what_the_merge_leaves_out():
+    """A band across the top of one bracket of the demo's still stack (10 % of it, a
+    mover painted out with --mask) shows the scene 6 px to the side: read, it makes the
+    stack look moved (and registered in full); left out as the merge leaves it, the
+    stack is still."""
+    from hdrio.align.quick import looks_still
+    from hdrio.align.registration import linear_tables
+    from hdrio.tools.demo import DEMO_EXPOSURES
+    from hdrio.tools.synthetic import (
+        demo_scene,
+        gamma_inverse_response,
+        gamma_response,
+        render_brackets,
+    )
+
+    times = [n / d for n, d in DEMO_EXPOSURES]
+    codes = render_brackets(demo_scene(seed=0), times, gamma_response, seed=0)
+    linear = linear_tables(gamma_inverse_response()[0], np.asarray(times))
+    best = best_exposed_bracket(codes, 255)
+    band = (slice(0, codes.shape[1] // 10), slice(None))
+    j = best + 1
+    codes[j][band] = np.roll(codes[j], 6, axis=1)[band]
+    excluded = np.zeros(codes.shape[:3], bool)
+    excluded[j][band] = True
+    assert not looks_still(codes, linear, 255, best)[0]
+    assert looks_still(codes, linear, 255, best, excluded=excluded) == (True, {})
+
+
 def test_corner_motion_error_is_the_first_order_spread():
     """The corner motion's standard error from the step's covariance matches the spread of
     the corner motion over steps drawn from that covariance (to 5 %: 20,000 draws, and

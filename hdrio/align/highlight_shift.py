@@ -19,6 +19,7 @@ import numpy as np
 
 from hdrio.align.correlation import correlate, sub_pixel, within_reach
 from hdrio.align.lucaskanade import translation
+from hdrio.align.pyramid import base_blocks
 
 MIN_PIXELS = 16
 """Base pixels the clipped region must hold in each bracket to be matched."""
@@ -62,12 +63,6 @@ def channel_clip_regions(codes_k: np.ndarray, codes_j: np.ndarray, top: int,
     clips least, of those it clips at :data:`MIN_PIXELS` base pixels or more: in a warm
     interior the long brackets' red is clipped nearly everywhere, and their blue draws
     the shapes. ``None`` when none is."""
-    height, width = codes_k.shape[0] // factor, codes_k.shape[1] // factor
-
-    def blocks(mask: np.ndarray) -> np.ndarray:
-        mask = mask[:height * factor, :width * factor]
-        return mask.reshape(height, factor, width, factor).any(axis=(1, 3))
-
     best, clipped, fewest = None, None, 0
     for c in range(codes_k.shape[-1]):
         at_top = codes_k[..., c] >= top
@@ -78,7 +73,7 @@ def channel_clip_regions(codes_k: np.ndarray, codes_j: np.ndarray, top: int,
         return None
     values = codes_j[..., best].reshape(-1)
     level = np.partition(values, values.size - fewest)[values.size - fewest]
-    return blocks(clipped), blocks(codes_j[..., best] >= level)
+    return base_blocks(clipped, factor), base_blocks(codes_j[..., best] >= level, factor)
 
 
 FLOOR = 0.5

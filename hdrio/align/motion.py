@@ -227,11 +227,15 @@ def _pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:
 
 def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
                solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None,
-               in_place: bool = False, skip_warp: bool = True
+               in_place: bool = False, skip_warp: bool = True,
+               excluded: np.ndarray | None = None
                ) -> tuple[ExposureStack, CameraResponse, Motion]:
     """Measure and (unless ``auto`` finds nothing moved) warp; ``solve`` re-solves the
     response on the aligned brackets (``None``: keep ``response``, e.g. a saved one).
-    ``skip_warp`` false (``--no-skip warp``) makes ``auto`` measure fully and warp."""
+    ``skip_warp`` false (``--no-skip warp``) makes ``auto`` measure fully and warp.
+    ``excluded``: ``(P, H, W)`` observations the merge leaves out (``--mask``,
+    ``--exclude-color``), each in its bracket's own frame: neither the still check nor
+    the registration reads them (a masked block of garbage is not motion)."""
     motion = Motion()
     if mode == "off" or stack.count < 2:
         return stack, response, motion
@@ -245,20 +249,20 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:
-        masks = usable_masks(stack.codes, stack.code_max)  # read once for all three
+        masks = usable_masks(stack.codes, stack.code_max, excluded)  # read once for all three
         # Stillness is checked from the bracket that sees most of the scene: from the
         # merge's reference (often a long bracket) the shortest ones share too few points.
         best = best_exposed_bracket(stack.codes, stack.code_max, masks=masks)
         motion.best_exposed = best
         still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
-                                     stack.code_max, best, masks)
+                                     stack.code_max, best, masks, excluded)
         if still:
             reference = reference_bracket(stack.codes, stack.code_max, masks=masks)
             motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
                                          model, (0.0,) * stack.count,
                                          tuple(sorted(refused.items())))
             return stack, response, motion
-    motion.alignment, response = register(stack, response, model, solve)
+    motion.alignment, response = register(stack, response, model, solve, excluded)
     if mode != "auto" or motion.alignment.moved or not skip_warp:
         stack = align_stack(stack, motion.alignment, in_place=in_place)
         motion.warped = True

@@ -134,6 +134,15 @@ def base_image(codes: np.ndarray, linear: np.ndarray, code_max: int,
     return BaseImage(np.log(out, out=out), valid, grey, factor)
 
 
+def base_blocks(mask: np.ndarray, factor: int) -> np.ndarray:
+    """``(H, W)`` bool at base resolution (``factor`` full-resolution pixels a side,
+    trailing rows and columns dropped as :func:`base_image` drops them): a base pixel is
+    set where any of its pixels is."""
+    height, width = mask.shape[0] // factor, mask.shape[1] // factor
+    mask = mask[:height * factor, :width * factor]
+    return mask.reshape(height, factor, width, factor).any(axis=(1, 3))
+
+
 def downsample(image: np.ndarray) -> np.ndarray:
     """2x2 block mean (a trailing odd row or column is dropped)."""
     h, w = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2

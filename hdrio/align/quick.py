@@ -121,12 +121,13 @@ def _grid_shape(height: int, width: int, rows: int, cols: int) -> tuple[int, int
     return -(-(height - rows // 2) // rows), -(-(width - cols // 2) // cols)
 
 
-def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False
-            ) -> tuple[np.ndarray, np.ndarray]:
+def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False,
+            excluded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample (on
     large images :data:`SPREAD` times fewer rows, as many times more columns); with
     ``usable_only``, among the sample's well-exposed pixels only (a dark bracket's
-    strongest gradients are at its clipped highlights)."""
+    strongest gradients are at its clipped highlights); never where any bracket of
+    ``excluded`` (``(P, H, W)``) is left out."""
     height, width = codes.shape[:2]
     stride = max(STRIDE, int(np.sqrt(height * width / GRID)))
     rows, cols = stride, stride
@@ -141,6 +142,8 @@ def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False
     strength = gx * gx + gy * gy
     if usable_only:
         strength[~good] = -1.0
+    if excluded is not None:
+        strength[excluded[:, rows // 2::rows, cols // 2::cols].any(axis=0)] = -1.0
     strength = strength.reshape(-1)
     count = min(POINTS, strength.size)
     index = np.sort(np.argpartition(strength, -count)[-count:])  # in memory order
@@ -158,16 +161,20 @@ def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
     return out
 
 
-def usable_masks(codes: np.ndarray, code_max: int) -> list[np.ndarray]:
+def usable_masks(codes: np.ndarray, code_max: int, excluded: np.ndarray | None = None
+                 ) -> list[np.ndarray]:
     """:func:`usable` of every bracket of ``codes`` ``(P, H, W, C)`` on the grid of about
     :data:`USABLE_SAMPLES` pixels (the grid
-    :func:`hdrio.align.registration.reference_bracket` scores on)."""
+    :func:`hdrio.align.registration.reference_bracket` scores on), outside ``excluded``
+    (``(P, H, W)``: the observations the merge leaves out)."""
     height, width = codes.shape[1:3]
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     masks = []
     for j in range(codes.shape[0]):
         masks.append(usable(codes[j], code_max, stride))
         release(codes, j)  # a staged bracket's pages: a sparse grid maps most of them
+        if excluded is not None:
+            masks[j] &= ~excluded[j, stride // 2::stride, stride // 2::stride]
     return masks
 
 
@@ -184,10 +191,11 @@ def corner_motion_error(delta: np.ndarray, covariance: np.ndarray, half: float
     return motion, float(np.sqrt(max(0.0, gradient @ covariance @ gradient)))
 
 
-def _read_all(codes: np.ndarray, linear: np.ndarray, brackets, ys, xs, low: int, high: int
-              ) -> dict[int, tuple]:
+def _read_all(codes: np.ndarray, linear: np.ndarray, brackets, ys, xs, low: int, high: int,
+              excluded: np.ndarray | None = None) -> dict[int, tuple]:
     """:func:`_read` of each of ``brackets`` at the points ``(ys, xs)``: ``{bracket:
-    (values, gx, gy, good)}``."""
+    (values, gx, gy, good)}``, a point not good where ``excluded`` (``(P, H, W)``)
+    leaves that bracket's observation out."""
     n = ys.size
     reads = {}
     for j in brackets:
@@ -195,6 +203,8 @@ def _read_all(codes: np.ndarray, linear: np.ndarray, brackets, ys, xs, low: int,
         _read(codes[j], np.ascontiguousarray(linear[j]), ys, xs, low, high, values, gx, gy,
               good)
         release(codes, j)
+        if excluded is not None:
+            good &= ~excluded[j, ys, xs]
         reads[j] = (values, gx, gy, good)
     return reads
 
@@ -231,7 +241,8 @@ def _pair_still(template, moving, ys, xs, height: int, width: int) -> bool | Non
 
 
 def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference: int,
-                masks: list[np.ndarray] | None = None) -> tuple[bool, dict[int, str]]:
+                masks: list[np.ndarray] | None = None, excluded: np.ndarray | None = None
+                ) -> tuple[bool, dict[int, str]]:
     """Whether one Gauss-Newton step finds every bracket within :data:`STILL` pixels of
     its nearest registrable neighbour towards ``reference``, and the brackets too little
     of which is usable to register (:func:`hdrio.align.registration.unusable`, on
@@ -249,17 +260,20 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
         ``(P, H, W, C)`` code values.
     linear
         ``(P, C, levels)``: ``f^-1(z) / dt_j``, relative radiance.
+    excluded
+        ``(P, H, W)`` observations the merge leaves out (``--mask``,
+        ``--exclude-color``): not read.
     """
     count, height, width, _ = codes.shape
     low, high = well_exposed_codes(code_max)
-    ys, xs = _points(codes[reference], linear[reference])
+    ys, xs = _points(codes[reference], linear[reference], excluded=excluded)
     release(codes, reference)
-    reads = _read_all(codes, linear, range(count), ys, xs, low, high)
+    reads = _read_all(codes, linear, range(count), ys, xs, low, high, excluded)
     refused: dict[int, str] = {}
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     scale = (stride / base_factor(height, width)) ** 2
     if masks is None:
-        masks = usable_masks(codes, code_max)
+        masks = usable_masks(codes, code_max, excluded)
     pairs = []
     for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
         k = reference
@@ -273,9 +287,10 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     for j, k in pairs:
         still = _pair_still(reads[k], reads[j], ys, xs, height, width)
         if still is None:  # too little in common at the reference's points: j's own
-            own_ys, own_xs = _points(codes[j], linear[j], usable_only=True)
+            own_ys, own_xs = _points(codes[j], linear[j], usable_only=True,
+                                     excluded=excluded)
             release(codes, j)
-            own = _read_all(codes, linear, (k, j), own_ys, own_xs, low, high)
+            own = _read_all(codes, linear, (k, j), own_ys, own_xs, low, high, excluded)
             still = _pair_still(own[k], own[j], own_ys, own_xs, height, width)
         if not still:  # moved, or still too little to tell: measure properly
             return False, refused

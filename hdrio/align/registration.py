@@ -44,6 +44,7 @@ from hdrio.align.lucaskanade import (
 from hdrio.align.pyramid import (
     REGISTRABLE,
     BaseImage,
+    base_blocks,
     base_factor,
     base_image,
     downsample,
@@ -291,17 +292,33 @@ def linear_tables(response: CameraResponse, exposures: np.ndarray) -> np.ndarray
 
 
 def estimate_alignment(stack: ExposureStack, response: CameraResponse,
-                       model: str = "euclidean") -> Alignment:
+                       model: str = "euclidean", excluded: np.ndarray | None = None
+                       ) -> Alignment:
     """Measure every bracket's warp to the reference bracket.
 
     The codes are read once per bracket (to build its base image); everything else
-    works on the base and its pyramid (:mod:`hdrio.align.pyramid`).
+    works on the base and its pyramid (:mod:`hdrio.align.pyramid`). ``excluded``: ``(P,
+    H, W)`` observations the merge leaves out (``--mask``, ``--exclude-color``), each
+    in its bracket's own frame; no base pixel that holds one is read, and a pair's
+    highlights are matched outside those of either bracket.
     """
     count, height, width, _ = stack.codes.shape
     factor = base_factor(height, width)
     linear = linear_tables(response, stack.exposures)
     bases = [base_image(stack.codes[j], linear[j], stack.code_max, factor)
              for j in range(count)]
+    held = [None if excluded is None or not excluded[j].any()
+            else base_blocks(excluded[j], factor) for j in range(count)]
+    for base, out in zip(bases, held):
+        if out is not None:
+            base.valid &= ~out
+
+    def kept(k: int, j: int, region: np.ndarray) -> np.ndarray:
+        """``region`` outside either bracket's excluded base pixels."""
+        for out in (held[k], held[j]):
+            if out is not None:
+                region = region & ~out
+        return region
     reference = reference_bracket(stack.codes, stack.code_max)
     top = well_exposed_codes(stack.code_max, REGISTRABLE)[1]  # a base's highest valid code
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape))
@@ -316,8 +333,8 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
         why = unusable(bases[k].valid, bases[j].valid)
         if why is not None and j < k:  # a shorter one: by the highlights k clipped
             level = float(np.log(linear[k][:, top].sum()))
-            clipped = bases[k].grey >= top
-            step = highlight_shift(clipped, bases[j].log >= level)
+            clipped = kept(k, j, bases[k].grey >= top)
+            step = highlight_shift(clipped, kept(k, j, bases[j].log >= level))
             if step is None:
                 return np.eye(3), why, False
             return refine_by_centroids(step, bases[k].log, bases[k].valid, clipped,
@@ -333,7 +350,8 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
         """The shorter ``j``'s shift to ``k`` matched on the highlights ``k`` clipped in
         one channel (:func:`hdrio.align.highlight_shift.channel_clip_regions`)."""
         regions = channel_clip_regions(stack.codes[k], stack.codes[j], top, factor)
-        return None if regions is None else highlight_shift(*regions)
+        return None if regions is None else highlight_shift(
+            *(kept(k, j, region) for region in regions))
 
     # Each bracket is aligned to its nearest registered neighbour towards the reference
     # (the pair shares the most well-exposed pixels), and the warps composed. Every
@@ -581,8 +599,8 @@ def align_masks(masks: np.ndarray, alignment: Alignment) -> np.ndarray:
 
 
 def register(stack: ExposureStack, response: CameraResponse, model: str,
-             solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None = None
-             ) -> tuple[Alignment, CameraResponse]:
+             solve: Callable[[ExposureStack, np.ndarray], CameraResponse] | None = None,
+             excluded: np.ndarray | None = None) -> tuple[Alignment, CameraResponse]:
     """Measure the alignment; when brackets moved and ``solve`` is given, re-solve the
     response on an aligned sample of the stack (a response solved on moving brackets
     mixes scene points at edges) and measure again with it, until the alignment agrees
@@ -598,16 +616,21 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
     4.4 px off (0.03 px measured afresh). A response solved on such a first pass is bent
     too (``hand_held(7, 19)``: brackets 0 and 1 9.7 px off, the curve up to 0.018 r.m.s.
     from the truth against the still stack's 0.007, the merge's median error 1.70x the
-    still stack's), so it is solved again on the second pass's alignment (1.22x)."""
-    alignment = estimate_alignment(stack, response, model)
+    still stack's), so it is solved again on the second pass's alignment (1.22x).
+
+    ``excluded``: ``(P, H, W)`` observations the merge leaves out, each in its bracket's
+    own frame (:func:`estimate_alignment`); the re-solve leaves out every pixel any
+    bracket excludes, as the response solve before alignment does."""
+    alignment = estimate_alignment(stack, response, model, excluded)
+    exclude = None if excluded is None else excluded.any(axis=0)
     if solve is None or not alignment.moved:
         return alignment, response
     for _ in range(RESOLVES):
         try:
-            solved = solve_on_sample(stack, alignment, solve)
+            solved = solve_on_sample(stack, alignment, solve, exclude)
         except HdrioError:  # too little left to solve from: keep the response before
             return alignment, response
-        again = estimate_alignment(stack, solved, model)
+        again = estimate_alignment(stack, solved, model, excluded)
         response, settled = solved, _agree(again, alignment, height=stack.shape[0],
                                            width=stack.shape[1])
         alignment = again

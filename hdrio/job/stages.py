@@ -338,9 +338,10 @@ def align_stage(prepared: Prepared, response: CameraResponse, plan: MergePlan,
         jit.announce(say, "motion")
     if plan.aligns:
         say(f"aligning {stack.count} brackets ({options.align})")
-    stack, response, motion = align_step(stack, response, options.align, solve,
-                                         in_place=owned, skip_warp="warp" in plan.skips)
     masks, excluded = prepared.masks, prepared.excluded
+    stack, response, motion = align_step(stack, response, options.align, solve,
+                                         in_place=owned, skip_warp="warp" in plan.skips,
+                                         excluded=excluded)
     if motion.warped and excluded is not None:  # the warped borders' colour
         if masks is not None and len(set(mask_files(options.masks, stack.files))) > 1:
             # A mask per bracket is drawn on that bracket: it moves with it. One shared
