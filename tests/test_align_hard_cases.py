@@ -380,17 +380,18 @@ def test_a_warm_ladders_long_brackets_are_registered_by_the_channel_they_clip_le
     3.3-5.3 px off (seeds 0, 1, 3). Now a shorter bracket also starts from the shift of
     the highlights its longer neighbour clipped in the channel it clips least (blue
     here, :func:`hdrio.align.highlight_shift.channel_clip_regions`), that shift itself is
-    a candidate, and a warp the edges cannot judge is taken where that shift agrees with
-    it. Measured: brackets 2-5 within 0.33-0.90 px, every bracket registered; the two
-    darkest, well exposed at 16 % of their pixels, 1.0 and 1.8 px (seeds 0 and 3: a
-    translation, their rotation left out; Lucas-Kanade from there walked 1-10 px off).
-    Bounds: 1 px for brackets 2-6, 2.5 px for all; the issue's 0.5 px is not met by the
-    darkest two."""
+    a candidate, a warp the edges cannot judge is taken where that shift agrees with it,
+    and the best warp is polished on the judge's misfit (Lucas-Kanade walked 1-10 px off
+    a good start on the dark second shortest bracket). Measured, seeds 0 and 3: every
+    bracket registered, brackets 2-5 within 0.33-0.58 px (0.33-0.90 without the polish),
+    the two darkest (well exposed at 16 % of their pixels) 0.53-0.57 and 0.96-1.00 px
+    (1.0 and 1.8 without). Bounds: 0.75 px for brackets 2-6, 1.5 px for all; the issue's
+    0.5 px is not met everywhere (seed 1: 0.92 px)."""
     case = hand_held_walkers("StillLife", 7, 2.0, seed, figure=False)
     alignment = merge_stack(case.stack(), MergeOptions(deghost="off")).motion.alignment
     errors = case.corner_errors(alignment)
     assert alignment.reference == 6 and not alignment.refused, alignment.refused
-    assert max(errors[2:]) < 1.0 and max(errors) < 2.5, errors
+    assert max(errors[2:]) < 0.75 and max(errors) < 1.5, errors
 
 
 def test_channel_clip_regions_read_the_channel_clipped_least():
