@@ -206,12 +206,14 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "; a clipped channel never below its clip's lower bound; docs/highlights.md)"),
     Option("--exclude-color", ("R,G,B",), "exclude_colour", integers(3, "R,G,B codes"),
            example=("0,0,255",), aliases=("--exclude-colour",),
-           help="keep pixels of this code value out of the solve and the merge (e.g. "
+           help="keep pixels of this code value out of the solve, registration and "
+                "the merge (e.g. "
                 "0,0,255 for registration borders): filled from the brackets where they "
                 "are not that colour; where every bracket is, alpha 0 (counted apart)"),
     Option("--mask", ("FILE",), "masks", text, example=("mask.png",), repeat=True,
-           help="keep a mask's black pixels (below half range) out of the solve and the "
-                "merge, as --exclude-color does: one file for every bracket, the option "
+           help="keep a mask's black pixels (below half range) out of the solve, "
+                "registration and the merge, as --exclude-color does: one file for every "
+                "bracket, the option "
                 "repeated once per bracket in their order, or a name with {stem} (each "
                 "bracket's file stem: masks/{stem}.png); a bracket's own mask moves with "
                 "it when --align warps it, a shared one is on the reference bracket"),

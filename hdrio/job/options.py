@@ -37,7 +37,8 @@ class MergeOptions:
     # hdrio/radiometry/cliptest.py).
     saturation: str = "auto"
     exclude_colour: tuple[int, ...] | None = None
-    # --mask files (hdrio.io.masks): kept out of the solve and the merge, as the colour.
+    # --mask files (hdrio.io.masks): kept out of the solve, registration and the merge,
+    # as the colour.
     masks: tuple[str, ...] = ()
     # Merge with each bracket's exposure estimated from the data (hdrio.merge.exposure_check);
     # the metadata's are checked against the data's either way.

@@ -69,7 +69,8 @@ class Prepared:
     masks
         ``--mask`` files read in the stack's order, or ``None``.
     excluded
-        ``(P, H, W)`` observations kept out of the solve and the merge, or ``None``.
+        ``(P, H, W)`` observations kept out of the solve, registration and the merge, or
+        ``None``.
     """
 
     stack: ExposureStack
