@@ -370,6 +370,17 @@ def test_quick_check_allows_for_a_noisy_pair_of_dark_brackets(monkeypatch):
     that allowance (SIGMAS 0) the check gave up and every demo run was registered in
     full."""
     import hdrio.align.quick as quick
+
+    codes, linear = _demo_still_stack()
+    best = best_exposed_bracket(codes, 255)
+    assert quick.looks_still(codes, linear, 255, best) == (True, {})
+    monkeypatch.setattr(quick, "SIGMAS", 0.0)
+    assert not quick.looks_still(codes, linear, 255, best)[0]
+
+
+def _demo_still_stack() -> tuple[np.ndarray, np.ndarray]:
+    """The demo's still stack (its codes, ``(P, H, W, 3)``) and the linear tables of its
+    true response (:func:`hdrio.align.registration.linear_tables`)."""
     from hdrio.align.registration import linear_tables
     from hdrio.tools.demo import DEMO_EXPOSURES
     from hdrio.tools.synthetic import (
@@ -381,12 +392,7 @@ def test_quick_check_allows_for_a_noisy_pair_of_dark_brackets(monkeypatch):
 
     times = [n / d for n, d in DEMO_EXPOSURES]
     codes = render_brackets(demo_scene(seed=0), times, gamma_response, seed=0)
-    stack = ExposureStack.from_arrays(codes, times)
-    linear = linear_tables(gamma_inverse_response()[0], stack.exposures)
-    best = best_exposed_bracket(stack.codes, stack.code_max)
-    assert quick.looks_still(stack.codes, linear, 255, best) == (True, {})
-    monkeypatch.setattr(quick, "SIGMAS", 0.0)
-    assert not quick.looks_still(stack.codes, linear, 255, best)[0]
+    return codes, linear_tables(gamma_inverse_response()[0], np.asarray(times, np.float64))
 
 
 def test_quick_check_does_not_read_what_the_merge_leaves_out():
@@ -395,18 +401,8 @@ def test_quick_check_does_not_read_what_the_merge_leaves_out():
     stack look moved (and registered in full); left out as the merge leaves it, the
     stack is still."""
     from hdrio.align.quick import looks_still
-    from hdrio.align.registration import linear_tables
-    from hdrio.tools.demo import DEMO_EXPOSURES
-    from hdrio.tools.synthetic import (
-        demo_scene,
-        gamma_inverse_response,
-        gamma_response,
-        render_brackets,
-    )
 
-    times = [n / d for n, d in DEMO_EXPOSURES]
-    codes = render_brackets(demo_scene(seed=0), times, gamma_response, seed=0)
-    linear = linear_tables(gamma_inverse_response()[0], np.asarray(times))
+    codes, linear = _demo_still_stack()
     best = best_exposed_bracket(codes, 255)
     band = (slice(0, codes.shape[1] // 10), slice(None))
     j = best + 1
