@@ -666,9 +666,9 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
     own frame (:func:`estimate_alignment`); the re-solve leaves out every pixel any
     bracket excludes, as the response solve before alignment does."""
     alignment = estimate_alignment(stack, response, model, excluded)
-    exclude = None if excluded is None else excluded.any(axis=0)
     if solve is None or not alignment.moved:
         return alignment, response
+    exclude = None if excluded is None else excluded.any(axis=0)
     for _ in range(RESOLVES):
         try:
             solved = solve_on_sample(stack, alignment, solve, exclude)
