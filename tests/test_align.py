@@ -485,6 +485,30 @@ def test_auto_leaves_a_still_truth_stack_unwarped(shared_data):
     assert max(result.motion.alignment.motion) == 0.0, result.motion.alignment.describe()
 
 
+def test_a_still_stack_that_registration_puts_still_merges_as_align_off(shared_data):
+    """The truth harness's Desk ladder through DoRF curve 0 as 8-bit JPEG, at 300 px
+    (``python -m benchmarks.motion_still``): the still check gives up, registration's
+    first pass puts the longest bracket 0.53 px off, the passes after it nothing. Merged
+    with the response solved for the last pass (on the blurred, aligned sample without
+    sharp edges) it was 5 % off its --align off merge at the median; nothing is warped,
+    so it is merged as read, with the response solved as read: the same pixels."""
+    from benchmarks.truth.config import REFERENCE_LADDER, StackSpec
+    from benchmarks.truth.curves import load_curve
+    from benchmarks.truth.methods import exposure_stack
+    from benchmarks.truth.scenes import read_scene
+    from benchmarks.truth.stacks import render_stack
+
+    shared_data("crf_database")
+    path = shared_data("openexr_scenes") / "Desk.exr"
+    frames, ev = REFERENCE_LADDER
+    spec = StackSpec("Desk", "dorf0", frames, ev, jpeg=True)
+    stack = exposure_stack(render_stack(spec, read_scene(path, 300), load_curve("dorf0")))
+    off = merge_stack(stack, MergeOptions(align="off", deghost="off"))
+    auto = merge_stack(stack, MergeOptions(align="auto", deghost="off"))
+    assert not auto.motion.warped
+    assert np.array_equal(auto.radiance, off.radiance)
+
+
 def test_ward2003_stays_put_without_evidence():
     # A bracket clipped everywhere has no bits: every candidate ties, and the shift must
     # stay at zero (it walked to (-1, -1) at each of five levels: (-31, -31)).

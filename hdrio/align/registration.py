@@ -664,7 +664,15 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
 
     ``excluded``: ``(P, H, W)`` observations the merge leaves out, each in its bracket's
     own frame (:func:`estimate_alignment`); the re-solve leaves out every pixel any
-    bracket excludes, as the response solve before alignment does."""
+    bracket excludes, as the response solve before alignment does.
+
+    Where the passes end with nothing moved, ``response`` (solved on the brackets as
+    read) is returned, not a re-solve on the sample: the brackets are merged as read. A
+    still JPEG ladder (Desk through DoRF curve 0, ``python -m benchmarks.motion_still``)
+    had its longest bracket put 0.53 px off by the first pass, none by the second and
+    third, and was merged with the third's response, solved on the blurred sample
+    without sharp edges: 5 % off its ``--align off`` merge at the median."""
+    first = response
     alignment = estimate_alignment(stack, response, model, excluded)
     if solve is None or not alignment.moved:
         return alignment, response
@@ -680,7 +688,7 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
         alignment = again
         if settled:
             break
-    return alignment, response
+    return alignment, response if alignment.moved else first
 
 
 def _agree(first: Alignment, second: Alignment, height: int, width: int) -> bool:
