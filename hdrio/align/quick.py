@@ -122,14 +122,16 @@ def _grid_shape(height: int, width: int, rows: int, cols: int) -> tuple[int, int
 
 
 def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False,
-            excluded: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample (on
-    large images :data:`SPREAD` times fewer rows, as many times more columns); with
-    ``usable_only``, among the sample's well-exposed pixels only (a dark bracket's
-    strongest gradients are at its clipped highlights); never where any bracket of
-    ``excluded`` (``(P, H, W)``) is left out."""
+            excluded: np.ndarray | None = None, partner: np.ndarray | None = None,
+            least: int = STRIDE) -> tuple[np.ndarray, np.ndarray]:
+    """Full-resolution ``(ys, xs)`` of the strongest gradients of a strided sample (every
+    ``least``-th row and column or sparser, about :data:`GRID` pixels; on large images
+    :data:`SPREAD` times fewer rows, as many times more columns); with ``usable_only``,
+    among the sample's well-exposed pixels only (a dark bracket's strongest gradients
+    are at its clipped highlights), and those of ``partner`` (another bracket's codes)
+    too when given; never where any bracket of ``excluded`` (``(P, H, W)``) is left out."""
     height, width = codes.shape[:2]
-    stride = max(STRIDE, int(np.sqrt(height * width / GRID)))
+    stride = max(least, int(np.sqrt(height * width / GRID)))
     rows, cols = stride, stride
     if height * width >= SPREAD_PIXELS:
         rows, cols = stride * SPREAD, max(1, stride // SPREAD)
@@ -141,6 +143,10 @@ def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False,
     gy, gx = np.gradient(image, rows, cols)  # per pixel: the grid's steps differ
     strength = gx * gx + gy * gy
     if usable_only:
+        strength[~good] = -1.0
+    if usable_only and partner is not None:
+        _grid(partner, np.zeros((partner.shape[2], 1)), low, high, rows, cols,
+              np.empty((0, 0)), good)
         strength[~good] = -1.0
     if excluded is not None:
         strength[excluded[:, rows // 2::rows, cols // 2::cols].any(axis=0)] = -1.0
@@ -292,6 +298,12 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
             release(codes, j)
             own = _read_all(codes, linear, (k, j), own_ys, own_xs, low, high, excluded)
             still = _pair_still(own[k], own[j], own_ys, own_xs, height, width)
+        if still is None:  # too few of either's: the strongest usable in both, densely
+            both_ys, both_xs = _points(codes[j], linear[j], usable_only=True,
+                                       excluded=excluded, partner=codes[k], least=1)
+            release(codes, j)
+            both = _read_all(codes, linear, (k, j), both_ys, both_xs, low, high, excluded)
+            still = _pair_still(both[k], both[j], both_ys, both_xs, height, width)
         if not still:  # moved, or still too little to tell: measure properly
             return False, refused
     return True, refused
