@@ -258,7 +258,10 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     those leave too few points usable in both (the ends of a long ladder: a 9 x 2 EV
     ladder's shortest pair had 186 of 20,000, and every still 9-bracket stack was
     registered in full) is measured again at the strongest gradients of its bracket
-    farther from the reference, which sees what its neighbour sees best.
+    farther from the reference, which sees what its neighbour sees best; and where those
+    leave too few too (a small image's mostly clipped longest bracket: 113 of a 300 x
+    437 ladder's every-4th-pixel grid), at the strongest gradients of the pixels usable
+    in both, every pixel of a small image.
 
     Parameters
     ----------

@@ -681,7 +681,7 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
         try:
             solved = solve_on_sample(stack, alignment, solve, exclude)
         except HdrioError:  # too little left to solve from: keep the response before
-            return alignment, response
+            break
         again = estimate_alignment(stack, solved, model, excluded)
         response, settled = solved, _agree(again, alignment, height=stack.shape[0],
                                            width=stack.shape[1])
