@@ -295,18 +295,16 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
             k = j
     for j, k in pairs:
         still = _pair_still(reads[k], reads[j], ys, xs, height, width)
-        if still is None:  # too little in common at the reference's points: j's own
+        # Too little in common at the reference's points: at j's own strongest usable
+        # gradients; too few of those either: at the strongest usable in both, densely.
+        for partner, least in ((None, STRIDE), (codes[k], 1)):
+            if still is not None:
+                break
             own_ys, own_xs = _points(codes[j], linear[j], usable_only=True,
-                                     excluded=excluded)
+                                     excluded=excluded, partner=partner, least=least)
             release(codes, j)
             own = _read_all(codes, linear, (k, j), own_ys, own_xs, low, high, excluded)
             still = _pair_still(own[k], own[j], own_ys, own_xs, height, width)
-        if still is None:  # too few of either's: the strongest usable in both, densely
-            both_ys, both_xs = _points(codes[j], linear[j], usable_only=True,
-                                       excluded=excluded, partner=codes[k], least=1)
-            release(codes, j)
-            both = _read_all(codes, linear, (k, j), both_ys, both_xs, low, high, excluded)
-            still = _pair_still(both[k], both[j], both_ys, both_xs, height, width)
         if not still:  # moved, or still too little to tell: measure properly
             return False, refused
     return True, refused
