@@ -253,18 +253,22 @@ def _linear_still_life(top: int, left: int, frames: int = 7, ev: float = 2.0, se
                       camera, seed), scene
 
 
-def test_a_response_is_not_re_solved_across_a_gap_registration_leaves():
-    """A still linear 16-bit StillLife ladder whose middle brackets registration refuses
+def test_a_response_is_not_re_solved_across_a_gap_registration_leaves(monkeypatch):
+    """A still linear 16-bit StillLife ladder whose middle bracket registration refuses
     (too few edges well exposed in both: the well-exposed codes are 5-95 % of a linear
-    range, a 4.3-stop window). Its re-solve sampled the brackets 16 and 256 times the
-    shortest side by side, with no bracket between them: the green and blue curves came
-    out with 3.4 times the true log range, and the merge was 70 % off at the median
-    (78 % with deghosting), against 0.8 % with --align off. Such a sample is not solved
-    on (hdrio.align.resolve.unlinked): the response solved as read is kept. Bound: 2x the
-    --align off merge's median error (measured 1.16 % against 0.78 %: the brackets
-    registration warped, 0.1-0.4 px, are still resampled)."""
+    range, a 4.3-stop window) and whose short brackets it warps by their highlights'
+    shift (as on a hand-held stack: here, with UNREFINED 0, by the unrefined shift of
+    0.15-0.29 px that it now takes as no motion). Its re-solve sampled the brackets 16
+    and 256 times the shortest side by side, with no bracket between them: the green and
+    blue curves came out with 3.4 times the true log range, and the merge was 78 % off at
+    the median, against 0.8 % with --align off. Such a sample is not solved on
+    (hdrio.align.resolve.unlinked): the response solved as read is kept. Bound: 2x the
+    --align off merge's median error (measured 1.16 % against 0.78 %: the warped brackets
+    are resampled)."""
+    import hdrio.align.registration as registration
     from hdrio.tools.synthetic import radiance_error, well_exposed
 
+    monkeypatch.setattr(registration, "UNREFINED", 0.0)
     case, scene = _linear_still_life(40, 30)
     stack = case.stack()
     inner = np.zeros(case.codes.shape[1:3], bool)
@@ -274,9 +278,29 @@ def test_a_response_is_not_re_solved_across_a_gap_registration_leaves():
     off = merge_stack(stack, MergeOptions(align="off", deghost="off"))
     errors = [radiance_error(r.radiance, scene, inner)["median"] for r in (auto, off)]
     assert errors[0] < 2 * errors[1], errors
+    assert auto.motion.warped  # the re-solve ran on a warped stack
     g, first = auto.response.log_inverse, off.response.log_inverse
     span, truth = g[60000] - g[100], first[60000] - first[100]
     assert np.allclose(span, truth, rtol=0.05), (span, truth)
+
+
+def test_unlinked_tests_only_neighbours_a_refused_bracket_stood_between():
+    """Two brackets of an aligned sample well exposed together at no point: a gap where
+    a refused bracket stood between them (kept 0 and 2), nothing to test where they are
+    neighbours in the stack (kept 0 and 1); and linked at LINK_POINTS points."""
+    from hdrio.align.resolve import LINK_POINTS, unlinked
+
+    codes = np.zeros((2, 20, 20, 3), np.uint8)
+    codes[0, :10] = 128  # each well exposed on its own half only
+    codes[1, 10:] = 128
+    uncovered = np.zeros((20, 20), bool)
+    assert unlinked(codes, 255, uncovered, [0, 2]) == 0
+    assert unlinked(codes, 255, uncovered, [0, 1]) is None
+    codes = np.zeros((2, 1, LINK_POINTS + 1, 3), np.uint8)
+    codes[:, :, :LINK_POINTS] = 128
+    assert unlinked(codes, 255, np.zeros((1, LINK_POINTS + 1), bool), [0, 2]) is None
+    codes[:, :, 0] = 0
+    assert unlinked(codes, 255, np.zeros((1, LINK_POINTS + 1), bool), [0, 2]) == 0
 
 
 def test_a_hand_held_ladder_registers_its_darkest_bracket():
