@@ -19,7 +19,7 @@ was registered in full. So an estimate also counts as still when it is under
 :data:`hdrio.align.registration.WITHIN` (``auto``'s own bound) and within
 :data:`SIGMAS` standard errors of :data:`STILL` (the error from the Gauss-Newton step's
 normal matrix and its residuals, those of a :data:`BLOCK`-pixel block counted once).
-A pair that is not still at once is measured again, at more points, and the most
+A pair that is not still at once is measured again, at other points, and the most
 precise of its measurements decides (:func:`looks_still`).
 """
 
