@@ -1,7 +1,8 @@
 """The generator's hand-held ladders against the same stacks held still (issue 28's bounds:
 median error at most 1.3x the still stack's, p99 at most 2x).
 
-``python -m benchmarks.hand_held [--frames 7] [--seeds 0-19] [--true-warps]``: for each
+``python -m benchmarks.hand_held [--frames 7] [--seeds 0-19] [--true-warps]
+[--encoding png|16-bit]``: for each
 seed, :func:`tests.hard_cases.hand_held` merged with the defaults and the same stack held
 still, the radiance error in the reference's frame over the well-exposed pixels (a 16 px
 border left out), median and p99 over the still stack's; the worst corner error of the
@@ -64,8 +65,9 @@ def with_true_warps(case):
     return patched()
 
 
-def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict:
-    """One seed's row (``lens``: :func:`tests.hard_cases.hand_held`'s point spread)."""
+def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0,
+            encoding: str = "png") -> dict:
+    """One seed's row (``lens``, ``encoding``: :func:`tests.hard_cases.hand_held`'s)."""
     import contextlib
 
     from hdrio.job.options import MergeOptions
@@ -73,8 +75,8 @@ def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict
     from hdrio.tools.synthetic import radiance_error, well_exposed
     from tests.hard_cases import hand_held
 
-    moving = hand_held(frames, seed, lens=lens)
-    held = hand_held(frames, seed, still=True, lens=lens)
+    moving = hand_held(frames, seed, lens=lens, encoding=encoding)
+    held = hand_held(frames, seed, still=True, lens=lens, encoding=encoding)
     with with_true_warps(moving) if true_warps else contextlib.nullcontext():
         result = merge_stack(moving.stack(), MergeOptions())
     still = merge_stack(held.stack(), MergeOptions())
@@ -82,7 +84,7 @@ def measure(frames: int, seed: int, true_warps: bool, lens: float = 0.0) -> dict
     height, width = moving.codes.shape[1:3]
     inner = np.zeros((height, width), bool)
     inner[16:-16, 16:-16] = True
-    inner &= well_exposed(held.codes, 255)
+    inner &= well_exposed(held.codes, held.camera.code_max)
     moved = radiance_error(result.radiance, moving.truth_in(alignment.reference), inner)
     base = radiance_error(still.radiance, held.truth_in(alignment.reference), inner)
     refused = sorted(j for j, _ in alignment.refused)
@@ -123,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--true-warps", action="store_true")
     parser.add_argument("--lens", type=float, default=0.0,
                         help="a Gaussian point spread (px) on every view, as a lens gives")
+    parser.add_argument("--encoding", default="png", choices=("png", "16-bit"),
+                        help="sRGB 8-bit codes or linear 16-bit ones")
     parser.add_argument("--registration", action="store_true")
     parser.add_argument("--json", default="benchmarks/results/hand_held.json")
     args = parser.parse_args(argv)
@@ -136,9 +140,10 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps({"registration": rows}, indent=1))
         return 0
-    rows = [measure(args.frames, seed, args.true_warps, args.lens)
+    rows = [measure(args.frames, seed, args.true_warps, args.lens, args.encoding)
             for seed in seeds_of(args.seeds)]
-    print(f"hand_held({args.frames}{f', lens={args.lens:g}' if args.lens else ''})"
+    print(f"hand_held({args.frames}{f', lens={args.lens:g}' if args.lens else ''}"
+          f"{f', {args.encoding}' if args.encoding != 'png' else ''})"
           f"{' with the true warps' if args.true_warps else ''}: "
           "error over the still stack's (bounds: median 1.3x, p99 2x)")
     print("seed | median | p99 | worst registered bracket (px) | refused")
@@ -151,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"frames": args.frames, "true_warps": args.true_warps,
-                               "lens": args.lens, "rows": rows}, indent=1))
+                               "lens": args.lens, "encoding": args.encoding, "rows": rows},
+                              indent=1))
     return 0
 
 

@@ -46,12 +46,34 @@ fractions: above a quarter of the range a code step is under 3.5 % of radiance f
 gamma-2.2 camera, so one bracket alone is nearly as good as the merge (docs/speed.md)."""
 
 
-def well_exposed_codes(code_max: int, fractions: tuple[float, float] = WELL_EXPOSED
-                       ) -> tuple[int, int]:
+def srgb_decoded(v: np.ndarray | float) -> np.ndarray:
+    """sRGB's decoding (IEC 61966-2-1) of ``v`` on [0, 1]: linear light on [0, 1]."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def well_exposed_codes(code_max: int, fractions: tuple[float, float] = WELL_EXPOSED,
+                       linear: np.ndarray | None = None) -> tuple[int, int]:
     """``(low, high)``: the code values strictly inside ``fractions`` of the range are
-    ``low .. high`` inclusive."""
-    low, high = fractions
-    return int(np.floor(low * code_max)) + 1, int(np.ceil(high * code_max)) - 1
+    ``low .. high`` inclusive.
+
+    ``linear``, ``(C, levels)``: the response's ``f^-1`` per channel (at any scale, a
+    bracket's ``f^-1 / dt`` too). For codes deeper than 8 bits ``low`` then reaches down
+    as far in light below ``high`` as the fractions reach on an sRGB camera's codes
+    (5 % of an sRGB range is 7.8 stops under its 95 %, 2 % is 9.2), where that is
+    lower: on a linear 16-bit ladder 5 % of the range is only 4.3 stops under 95 %, and
+    neighbours 2 EV apart were well exposed together over 2.3 stops (registration
+    refused or misplaced them, docs/motion.md). Eight-bit codes keep their fractions: a
+    code step is too coarse a share of the light below them."""
+    low_fraction, high_fraction = fractions
+    low = int(np.floor(low_fraction * code_max)) + 1
+    high = int(np.ceil(high_fraction * code_max)) - 1
+    if linear is None or code_max <= 255:
+        return low, high
+    light = np.asarray(linear, dtype=np.float64)[:, :code_max + 1]
+    floor = light[:, high] * float(srgb_decoded(low_fraction) / srgb_decoded(high_fraction))
+    reach = max(int(np.argmax(row >= level)) for row, level in zip(light, floor))
+    return min(low, max(1, reach)), high
 
 
 def code_range(codes: np.ndarray) -> tuple[int, int]:

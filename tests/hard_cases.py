@@ -184,15 +184,32 @@ def ladder(scene: np.ndarray, frames: int, ev: float = 2.0) -> np.ndarray:
     return 0.18 / key * 2.0 ** (ev * (np.arange(frames) - (frames - 1) / 2.0))
 
 
+def _camera(encoding: str) -> Camera:
+    """The default sensor with sRGB codes (``jpeg``, ``png``) or linear ones (``16-bit``)."""
+    return Camera(encoding=encoding,
+                  curve=(lambda x: np.clip(x, 0, 1)) if encoding == "16-bit" else srgb)
+
+
 def tripod_stack(encoding: str = "jpeg", seed: int = 0, frames: int = 7,
                  scene: str = "Desk", height: int = 200, width: int = 300) -> HardCase:
     """A still ladder, 2 EV apart, of a real scene: a camera's noise (20,000 e- full
     well, 4 e- read noise), sRGB codes (8-bit JPEG or PNG) or linear 16-bit."""
-    camera = Camera(encoding=encoding,
-                    curve=(lambda x: np.clip(x, 0, 1)) if encoding == "16-bit" else srgb)
+    camera = _camera(encoding)
     radiance = scene_crop(scene, height, width)
     return _render(f"tripod_{scene}_{encoding}", [radiance] * frames,
                    ladder(radiance, frames), camera, seed)
+
+
+def linear_still_life(top: int, left: int, frames: int = 7, ev: float = 2.0, seed: int = 0
+                      ) -> tuple[HardCase, np.ndarray]:
+    """A still linear 16-bit ladder (``frames`` x ``ev``, :func:`tripod_stack`'s camera)
+    of a full-resolution StillLife crop at ``(top, left)``: ``(case, its scene)``."""
+    from tests.align_truth import scene_crop as crop
+    from tests.align_truth import view
+
+    scene = view(crop("StillLife", 200, 300, top, left), np.eye(3)).astype(np.float64)
+    return _render("linear_still_life", [scene] * frames, ladder(scene, frames, ev),
+                   _camera("16-bit"), seed), scene
 
 
 def add_sun(radiance: np.ndarray, where=(0.2, 0.8), size: float = 3.0,
@@ -209,7 +226,7 @@ def add_sun(radiance: np.ndarray, where=(0.2, 0.8), size: float = 3.0,
 
 def hand_held(frames: int = 7, seed: int = 0, height: int = 200, width: int = 300,
               scene: str = "GoldenGate", shift: float = 6.0, degrees: float = 0.3,
-              still: bool = False, lens: float = 0.0) -> HardCase:
+              still: bool = False, lens: float = 0.0, encoding: str = "png") -> HardCase:
     """A hand-held ladder, 2 EV apart, with a sun: every bracket moved by up to
     ``shift`` px and ``degrees`` (``still``: the same stack on a tripod).
 
@@ -217,7 +234,8 @@ def hand_held(frames: int = 7, seed: int = 0, height: int = 200, width: int = 30
     bracket's view is blurred by before it is captured, as a lens and an anti-aliasing
     filter blur what reaches the sensor (the truth is the blurred view). 0, the default,
     keeps edges as sharp as the 2x2 area average of the supersampled scene: sharper than
-    any lens gives, the hardest case for resampling."""
+    any lens gives, the hardest case for resampling. ``encoding``: ``png`` (sRGB codes)
+    or ``16-bit`` (linear codes, as a raw converter writes them)."""
     from tests.align_truth import SUPER, euclidean, view
     from tests.align_truth import scene_crop as crop
 
@@ -230,9 +248,10 @@ def hand_held(frames: int = 7, seed: int = 0, height: int = 200, width: int = 30
     scenes = [view(hi, w).astype(np.float64) for w in warps]
     if lens > 0:
         scenes = [scipy.ndimage.gaussian_filter(s, (lens, lens, 0)) for s in scenes]
-    camera = Camera(encoding="png")
+    camera = _camera(encoding)
     exposures = ladder(view(hi, np.eye(3)), frames)
     return _render(f"handheld{frames}_{seed}{'_still' if still else ''}"
+                   f"{'_linear' if encoding == '16-bit' else ''}"
                    f"{f'_lens{lens:g}' if lens else ''}", scenes, exposures, camera, seed, warps)
 
 

@@ -85,8 +85,8 @@ def comparametric_correction(codes: np.ndarray, estimates: np.ndarray, variance:
         with np.errstate(divide="ignore"):
             logs = np.log(corrected)
         _log_ratios(grid, logs, variance, reference, j, 1, LIMIT, sums, counts)
-        # Deep codes in blocks of codes (at most 1024 of them, as the solve bins 16-bit
-        # codes): a Gaussian of 512 codes over 65536 took 0.27 s a channel and bracket.
+        # Deep codes in blocks of codes (at most 1024 of them, as many as the solve has
+        # levels at 16 bits): a Gaussian of 512 codes over 65536 took 0.27 s a channel and bracket.
         block = max(1, levels // 1024)
         bins = -(-levels // block)
         centres = np.minimum(np.arange(bins) * block + (block - 1) / 2.0, levels - 1)

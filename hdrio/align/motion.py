@@ -249,13 +249,15 @@ def align_step(stack: ExposureStack, response: CameraResponse, mode: str,
         return stack, response, motion
     model = "euclidean" if mode == "auto" else mode
     if mode == "auto" and skip_warp:
-        masks = usable_masks(stack.codes, stack.code_max, excluded)  # read once for all three
+        linear = linear_tables(response, stack.exposures)
+        masks = usable_masks(stack.codes, stack.code_max, excluded,  # read once for all three
+                             linear[0])
         # Stillness is checked from the bracket that sees most of the scene: from the
         # merge's reference (often a long bracket) the shortest ones share too few points.
         best = best_exposed_bracket(stack.codes, stack.code_max, masks=masks)
         motion.best_exposed = best
-        still, refused = looks_still(stack.codes, linear_tables(response, stack.exposures),
-                                     stack.code_max, best, masks, excluded)
+        still, refused = looks_still(stack.codes, linear, stack.code_max, best, masks,
+                                     excluded)
         if still:
             reference = reference_bracket(stack.codes, stack.code_max, masks=masks)
             motion.alignment = Alignment(reference, np.repeat(np.eye(3)[None], stack.count, 0),
@@ -296,7 +298,8 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
     # The bracket the others are tested against: the one that sees most of the scene (not
     # necessarily the one they were aligned to, which carries most of the merge).
     reference = (motion.best_exposed if motion.best_exposed is not None
-                 else best_exposed_bracket(stack.codes, stack.code_max))
+                 else best_exposed_bracket(stack.codes, stack.code_max,
+                                           linear=np.exp(response.log_inverse).T))
     cells = None
     if motion.warped:
         cells = np.stack([coverage(motion.alignment.transforms[j], height, width, CELL)
@@ -355,7 +358,7 @@ def deghost_step(stack: ExposureStack, response: CameraResponse, motion: Motion,
             # invented borders, no sharp edges, every bracket blurred alike (the stack
             # is in the reference's frame now).
             solved = (solve_on_sample(stack, replace(motion.alignment, transforms=np.repeat(
-                np.eye(3)[None], count, axis=0)), solve, exclude) if motion.warped
+                np.eye(3)[None], count, axis=0)), solve, exclude, response) if motion.warped
                 else solve(stack, exclude))
         except HdrioError:  # too little left to solve from: keep the response we have
             break

@@ -23,7 +23,8 @@ REGISTRABLE = (0.02, 0.95)
 """Codes strictly inside these fractions of the range register a bracket (the base's
 ``valid``): darker than the well-exposed range's 5 %, so that the longest brackets of a
 long ladder, clipped but in the shadows, share edges with their neighbours (a hand-held
-7 x 2 EV ladder's two longest were left unregistered at 5 %)."""
+7 x 2 EV ladder's two longest were left unregistered at 5 %). Deeper than 8 bits, as far
+in light as these fractions reach on sRGB codes (:func:`hdrio.skips.well_exposed_codes`)."""
 
 BASE_PIXELS = 1_600_000
 """Largest base image: above this the base is block-averaged 2x, 4x, ... (24 MP -> 4x)."""
@@ -127,7 +128,7 @@ def base_image(codes: np.ndarray, linear: np.ndarray, code_max: int,
     out = np.empty((height, width), np.float32)
     grey = np.empty((height, width), np.float32)
     valid = np.empty((height, width), np.bool_)
-    low, high = well_exposed_codes(code_max, REGISTRABLE)
+    low, high = well_exposed_codes(code_max, REGISTRABLE, linear)
     on_threads(_base_rows, height, codes, np.ascontiguousarray(linear, np.float32), low, high,
                factor, out, valid, grey)
     np.maximum(out, np.float32(1e-30), out=out)  # in place: no full-size temporaries

@@ -147,7 +147,8 @@ def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False,
     shape = _grid_shape(height, width, rows, cols)
     image = np.empty(shape)
     good = np.empty(shape, np.bool_)
-    low, high = well_exposed_codes(int(linear.shape[-1]) - 1) if usable_only else (0, 0)
+    low, high = (well_exposed_codes(int(linear.shape[-1]) - 1, linear=linear) if usable_only
+                 else (0, 0))
     _grid(codes, np.ascontiguousarray(linear, np.float64), low, high, rows, cols, image, good)
     gy, gx = np.gradient(image, rows, cols)  # per pixel: the grid's steps differ
     strength = gx * gx + gy * gy
@@ -166,27 +167,30 @@ def _points(codes: np.ndarray, linear: np.ndarray, usable_only: bool = False,
     return i * rows + rows // 2, k * cols + cols // 2
 
 
-def usable(codes: np.ndarray, code_max: int, stride: int) -> np.ndarray:
+def usable(codes: np.ndarray, code_max: int, stride: int, linear: np.ndarray | None = None
+           ) -> np.ndarray:
     """``(h, w)``: every ``stride``-th pixel of one bracket ``(H, W, C)``, whether every
-    channel is well exposed (unclipped, above the noise)."""
-    low, high = well_exposed_codes(code_max)
+    channel is well exposed (unclipped, above the noise; ``linear``, ``(C, levels)``: the
+    response's ``f^-1``, which sets the window of deep codes,
+    :func:`hdrio.skips.well_exposed_codes`)."""
+    low, high = well_exposed_codes(code_max, linear=linear)
     out = np.empty(_grid_shape(codes.shape[0], codes.shape[1], stride, stride), np.bool_)
     _grid(codes, np.zeros((codes.shape[2], 1)), low, high, stride, stride,
           np.empty((0, 0)), out)
     return out
 
 
-def usable_masks(codes: np.ndarray, code_max: int, excluded: np.ndarray | None = None
-                 ) -> list[np.ndarray]:
+def usable_masks(codes: np.ndarray, code_max: int, excluded: np.ndarray | None = None,
+                 linear: np.ndarray | None = None) -> list[np.ndarray]:
     """:func:`usable` of every bracket of ``codes`` ``(P, H, W, C)`` on the grid of about
     :data:`USABLE_SAMPLES` pixels (the grid
     :func:`hdrio.align.registration.reference_bracket` scores on), outside ``excluded``
-    (``(P, H, W)``: the observations the merge leaves out)."""
+    (``(P, H, W)``: the observations the merge leaves out; ``linear`` as :func:`usable`)."""
     height, width = codes.shape[1:3]
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     masks = []
     for j in range(codes.shape[0]):
-        masks.append(usable(codes[j], code_max, stride))
+        masks.append(usable(codes[j], code_max, stride, linear))
         release(codes, j)  # a staged bracket's pages: a sparse grid maps most of them
         if excluded is not None:
             masks[j] &= ~excluded[j, stride // 2::stride, stride // 2::stride]
@@ -310,7 +314,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
         ``--exclude-color``): not read.
     """
     count, height, width, _ = codes.shape
-    low, high = well_exposed_codes(code_max)
+    low, high = well_exposed_codes(code_max, linear=linear[reference])
     ys, xs = _points(codes[reference], linear[reference], excluded=excluded)
     release(codes, reference)
     reads = _read_all(codes, linear, range(count), ys, xs, low, high, excluded)
@@ -318,7 +322,7 @@ def looks_still(codes: np.ndarray, linear: np.ndarray, code_max: int, reference:
     stride = max(1, int(np.sqrt(height * width / USABLE_SAMPLES)))
     scale = (stride / base_factor(height, width)) ** 2
     if masks is None:
-        masks = usable_masks(codes, code_max, excluded)
+        masks = usable_masks(codes, code_max, excluded, linear[reference])
     pairs = []
     for side in (range(reference - 1, -1, -1), range(reference + 1, count)):
         k = reference

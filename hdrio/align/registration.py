@@ -194,15 +194,16 @@ class Alignment:
 
 
 def _well_exposed_grids(codes: np.ndarray, code_max: int, samples: int,
-                        masks: list[np.ndarray] | None):
+                        masks: list[np.ndarray] | None, linear: np.ndarray | None = None):
     """Each bracket's well-exposed pixels (every channel within
-    :data:`hdrio.skips.WELL_EXPOSED`) on a grid of about ``samples`` pixels, or ``masks``
-    of them already made, as a list of bool arrays."""
+    :data:`hdrio.skips.WELL_EXPOSED`, in light through ``linear`` when given:
+    :func:`hdrio.skips.well_exposed_codes`) on a grid of about ``samples`` pixels, or
+    ``masks`` of them already made, as a list of bool arrays."""
     if masks is not None:
         return masks
     height, width = codes.shape[1:3]
     step = max(1, int(math.sqrt(height * width / samples)))
-    low, high = well_exposed_codes(code_max)
+    low, high = well_exposed_codes(code_max, linear=linear)
     grids = codes[:, step // 2::step, step // 2::step]
     return [np.all((grid >= low) & (grid <= high), axis=-1) for grid in grids]
 
@@ -214,19 +215,23 @@ def _nearest_the_middle(scores: list[int]) -> int:
 
 
 def best_exposed_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
-                         masks: list[np.ndarray] | None = None) -> int:
+                         masks: list[np.ndarray] | None = None,
+                         linear: np.ndarray | None = None) -> int:
     """The best-exposed bracket of ``codes`` ``(P, H, W, C)``: the most pixels with every
     channel well exposed, on a grid of about ``samples`` pixels (or ``masks`` of them
-    already made); the one nearest the middle on a tie. Deghosting tests every bracket
-    against it (:mod:`hdrio.align.deghost`): it sees the most of the scene."""
+    already made; ``linear``, ``(C, levels)``: the response's ``f^-1``, which sets the
+    window of deep codes, :func:`hdrio.skips.well_exposed_codes`); the one nearest the
+    middle on a tie. Deghosting tests every bracket against it
+    (:mod:`hdrio.align.deghost`): it sees the most of the scene."""
     return _nearest_the_middle([int(np.count_nonzero(good)) for good in
-                                _well_exposed_grids(codes, code_max, samples, masks)])
+                                _well_exposed_grids(codes, code_max, samples, masks, linear)])
 
 
 def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
-                      masks: list[np.ndarray] | None = None) -> int:
+                      masks: list[np.ndarray] | None = None,
+                      linear: np.ndarray | None = None) -> int:
     """The bracket the others are aligned to: the one that carries most of the merge, the
-    *longest* well-exposed bracket at the most pixels (grid and ties as
+    *longest* well-exposed bracket at the most pixels (grid, ``linear`` and ties as
     :func:`best_exposed_bracket`).
 
     The noise-optimal merge leans on the longest bracket not clipped at each pixel (the
@@ -241,7 +246,7 @@ def reference_bracket(codes: np.ndarray, code_max: int, samples: int = 65536,
     1.77x / 1.51x."""
     scores = [0] * codes.shape[0]
     longer = None  # pixels some longer bracket is well exposed at
-    grids = _well_exposed_grids(codes, code_max, samples, masks)
+    grids = _well_exposed_grids(codes, code_max, samples, masks, linear)
     for j in reversed(range(len(grids))):
         good = grids[j]
         scores[j] = int(np.count_nonzero(good if longer is None else good & ~longer))
@@ -331,7 +336,7 @@ def estimate_alignment(stack: ExposureStack, response: CameraResponse,
             if out is not None:
                 region = region & ~out
         return region
-    reference = reference_bracket(stack.codes, stack.code_max)
+    reference = reference_bracket(stack.codes, stack.code_max, linear=linear[0])
     top = well_exposed_codes(stack.code_max, REGISTRABLE)[1]  # a base's highest valid code
     levels = min(REFINE_LEVELS, levels_above(*bases[0].log.shape))
     transforms = np.repeat(np.eye(3)[None], count, axis=0)  # base pixels, then full
@@ -696,7 +701,7 @@ def register(stack: ExposureStack, response: CameraResponse, model: str,
     exclude = None if excluded is None else excluded.any(axis=0)
     for _ in range(RESOLVES):
         try:
-            solved = solve_on_sample(stack, alignment, solve, exclude)
+            solved = solve_on_sample(stack, alignment, solve, exclude, response)
         except HdrioError:  # too little left to solve from: keep the response before
             break
         again = estimate_alignment(stack, solved, model, excluded)

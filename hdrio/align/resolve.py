@@ -137,7 +137,8 @@ def sample_brackets(count: int, alignment) -> list[int]:
 
 def solve_on_sample(stack: ExposureStack, alignment,
                     solve: Callable[[ExposureStack, np.ndarray], CameraResponse],
-                    exclude: np.ndarray | None = None) -> CameraResponse:
+                    exclude: np.ndarray | None = None,
+                    response: CameraResponse | None = None) -> CameraResponse:
     """``solve(small, exclude)`` (a response solve, :func:`hdrio.job.stages.response_solver`)
     on the aligned sample of ``stack`` (:func:`sampled_stack`, on the grid of
     :func:`sample_step`), leaving out the pixels ``exclude`` (``(H, W)``, in the
@@ -153,14 +154,17 @@ def solve_on_sample(stack: ExposureStack, alignment,
     linear 16-bit ladder, 7 x 2 EV, whose middle bracket registration could not judge:
     its sample kept brackets 16 and 256 times the shortest side by side, and the curve
     re-solved on it had the green and blue channels' log range 3.4 times the true one;
-    the merge was 70 % off at the median, against 0.8 % with ``--align off``.)"""
+    the merge was 70 % off at the median, against 0.8 % with ``--align off``.)
+    ``response``: the one the stack was registered with, through which deep codes'
+    window is read (:func:`hdrio.skips.well_exposed_codes`)."""
     height, width = stack.shape[:2]
     step = sample_step(height, width)
     small, uncovered = sampled_stack(stack, alignment, step)
     if exclude is not None:
         uncovered |= exclude[::step, ::step]
     gap = unlinked(small.codes, small.code_max, uncovered,
-                   sample_brackets(stack.count, alignment))
+                   sample_brackets(stack.count, alignment),
+                   None if response is None else np.exp(response.log_inverse).T)
     if gap is not None:
         raise HdrioError(f"the aligned sample's brackets of {small.exposures[gap]:.4g} and "
                          f"{small.exposures[gap + 1]:.4g} s are well exposed together at "
@@ -168,7 +172,8 @@ def solve_on_sample(stack: ExposureStack, alignment,
     return on_full_grid(solve(small, uncovered), small.shape[1], width, step)
 
 
-def unlinked(codes: np.ndarray, code_max: int, uncovered: np.ndarray, kept) -> int | None:
+def unlinked(codes: np.ndarray, code_max: int, uncovered: np.ndarray, kept,
+             linear: np.ndarray | None = None) -> int | None:
     """The first ``j`` whose brackets ``j`` and ``j + 1`` of the sample ``codes`` ``(P, h,
     w, C)`` (sorted by exposure; ``kept``: each one's bracket in the stack) had a bracket
     left out between them and are both well exposed in every channel
@@ -176,8 +181,9 @@ def unlinked(codes: np.ndarray, code_max: int, uncovered: np.ndarray, kept) -> i
     points not ``uncovered`` (``(h, w)``), or ``None``. (Neighbours in the stack are not
     tested: the solve ties them through every code it weights, not only the well-exposed
     ones; tested, the re-solves of hand-held 8-bit ladders were refused, and their merges
-    went 17x off.)"""
-    low, high = well_exposed_codes(code_max)
+    went 17x off.) ``linear``: the response's ``f^-1``, ``(C, levels)``, which sets the
+    window of deep codes."""
+    low, high = well_exposed_codes(code_max, linear=linear)
     for j in range(codes.shape[0] - 1):
         if kept[j + 1] == kept[j] + 1:
             continue

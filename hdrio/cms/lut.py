@@ -2,9 +2,10 @@
 
 The LUT maps normalised code values ``Z / code_max`` in [0, 1] to hdrio's single-exposure
 linearisation ``f^-1(Z) = exp(g(Z))`` (relative, ``g(z_mid) = 0``), one column per channel,
-at the levels hdrio solved (every code for 8-bit; 1024 bins for 16-bit, linearly
-interpolated between them). The config is the project's (:mod:`hdrio.cms.ocioconfig`)
-plus a colour space that applies the LUT, then the input encoding's primaries, so
+at as many evenly spaced codes as hdrio solved levels (every code for 8-bit; 1024 codes
+for 16-bit, linearly interpolated between them). The config is the project's
+(:mod:`hdrio.cms.ocioconfig`) plus a colour space that applies the LUT, then the input
+encoding's primaries, so
 ``oiiotool --colorconfig DIR/config.ocio in.png --colorconvert NAME lin_rec709_scene``
 linearises that camera's images as hdrio does.
 """

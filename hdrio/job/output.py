@@ -16,6 +16,7 @@ from hdrio.io.paths import resolved, with_relative_sources
 from hdrio.io.write import HALF_MAX, write_exr
 from hdrio.job.result import MergeResult
 from hdrio.merge.weighted_mean import MergeStatistics, clipped_everywhere_mask
+from hdrio.radiometry.levels import code_of
 from hdrio.radiometry.luminance import rgb_chromaticities
 from hdrio.stack import ExposureStack
 
@@ -32,8 +33,10 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
     """The EXR header: ``chromaticities`` plus provenance under ``hdrio:`` (see docs)."""
     stack, response, options = result.stack, result.response, result.options
     levels = int(response.parameters.get("levels", response.code_max + 1))
-    positions = np.rint(np.arange(levels) * (response.code_max / (levels - 1))).astype(int)
-    curves = response.log_inverse[positions]
+    spacing = str(response.parameters.get("spacing", "even"))
+    at = code_of(levels, response.code_max, spacing)  # every code a level: whole codes
+    curves = np.stack([np.interp(at, np.arange(response.code_max + 1), g)
+                       for g in response.log_inverse.T], axis=1)
     attributes: dict[str, object] = {
         "chromaticities": rgb_chromaticities(options.colourspace),
         "Software": f"hdrio {__version__}",
@@ -47,6 +50,7 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
         "hdrio:codeMax": int(stack.code_max),
         "hdrio:responseMethod": response.method,
         "hdrio:responseLevels": levels,
+        "hdrio:responseSpacing": spacing,
         "hdrio:weighting": options.weighting,
         "hdrio:lambda": float(options.smoothing),
         "hdrio:sampling": options.sampling,

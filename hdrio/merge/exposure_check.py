@@ -31,6 +31,7 @@ from hdrio.errors import InputError
 from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
+from hdrio.skips import well_exposed_codes
 from hdrio.stack import ExposureStack, first_too_close
 
 WARN_STOPS = 1 / 6
@@ -45,13 +46,25 @@ TEST_MAX_STOPS = 0.5
 that moved between exposures: the check runs before they are registered), and the user
 is told (:data:`WARN_STOPS`)."""
 WELL_EXPOSED_CODES = (0.15, 0.9)
-"""Codes used, as fractions of ``code_max``: away from the noise floor and the shoulder."""
+"""Codes used, as fractions of ``code_max``: away from the noise floor and the shoulder
+(deeper than 8 bits, as far down in light as on sRGB codes: :func:`compared_codes`)."""
 MAX_PIXELS = 1 << 18
 """Pixels per bracket looked at (a regular subsample of larger images)."""
 MIN_OVERLAP = 200
 """Observations (pixel-channels) a pair of brackets must share to be compared."""
 PRIOR_WEIGHT = 1e-3
 """Weight of the metadata's ratio of neighbours, against ``sqrt(overlap)`` for data."""
+
+
+def compared_codes(response: CameraResponse) -> tuple[int, int]:
+    """``(low, high)``: the codes ``low .. high`` that brackets are compared on
+    (:data:`WELL_EXPOSED_CODES`, through ``response`` for deep codes:
+    :func:`hdrio.skips.well_exposed_codes`). On a linear 16-bit ladder 15-90 % of the
+    range is 2.6 stops, and neighbours 2 EV apart shared 0.6 of them: its two shortest
+    brackets, which see little but a sun and a sky, were measured 0.44 stop brighter
+    than they are (stop 52)."""
+    return well_exposed_codes(response.code_max, WELL_EXPOSED_CODES,
+                              np.exp(response.log_inverse).T)
 
 
 def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
@@ -106,11 +119,10 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
     count, height, width, channels = codes.shape
     stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
     sample = strided_copy(codes, stride).reshape(count, -1, channels)  # staged: paged out
-    code_max = response.code_max
-    low, high = (fraction * code_max for fraction in WELL_EXPOSED_CODES)
+    low, high = compared_codes(response)
     columns = np.arange(channels)
     log_e = response.log_inverse[sample, columns]
-    good = (sample > low) & (sample < high) & response.supported[sample, columns]
+    good = (sample >= low) & (sample <= high) & response.supported[sample, columns]
     good[list(unmeasured)] = False
     if exclude is not None:
         good &= ~exclude[::stride, ::stride].reshape(1, -1, 1)

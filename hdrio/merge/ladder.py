@@ -44,7 +44,7 @@ from hdrio.io.staging import strided_copy
 from hdrio.merge.exposure_check import WARN_STOPS, ExposureCheck, exposures_from_data, in_order
 from hdrio.merge.exposure_check import fit_log_exposures as fit
 from hdrio.radiometry.curve import CameraResponse, linear_response
-from hdrio.skips import classify
+from hdrio.skips import classify, srgb_decoded
 from hdrio.stack import ExposureStack
 
 CAMERA_STEP = 1 / 3
@@ -99,7 +99,7 @@ def starting_response(code_max: int, channels: int, encoding: str = "sRGB",
         curve, x = "Adobe RGB", v ** ADOBE_RGB_GAMMA
     else:
         curve = "sRGB"
-        x = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+        x = srgb_decoded(v)
     g = np.log(np.maximum(x, x[1] / 2))
     g -= g[(code_max + 1) // 2]
     supported = np.ones((code_max + 1, channels), bool)

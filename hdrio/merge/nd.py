@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hdrio.merge.exposure_check import MAX_PIXELS, MIN_OVERLAP, WELL_EXPOSED_CODES
+from hdrio.merge.exposure_check import MAX_PIXELS, MIN_OVERLAP, compared_codes
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.stack import ExposureStack
 
@@ -109,9 +109,9 @@ def filter_gains(stack: ExposureStack, response: CameraResponse, stops: np.ndarr
     stride = max(1, math.ceil(math.sqrt(height * width / MAX_PIXELS)))
     sample = np.asarray(stack.codes[:, ::stride, ::stride]).reshape(count, -1, channels)
     columns = np.arange(channels)
-    low, high = (fraction * response.code_max for fraction in WELL_EXPOSED_CODES)
+    low, high = compared_codes(response)
     log_x = response.log_inverse[sample, columns] - np.log(stack.exposures)[:, None, None]
-    good = (sample > low) & (sample < high) & response.supported[sample, columns]
+    good = (sample >= low) & (sample <= high) & response.supported[sample, columns]
     gains = np.ones((count, channels))
     found: dict[float, np.ndarray | None] = {}
     for value in sorted(set(stops[stops > 0].tolist())):

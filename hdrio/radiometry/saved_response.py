@@ -13,6 +13,7 @@ import numpy as np
 
 from hdrio.errors import InputError
 from hdrio.radiometry.curve import CameraResponse, linear_response
+from hdrio.radiometry.levels import SPACINGS, level_of
 
 _RANGE = re.compile(r"(\w+) (\d+)-(\d+)")
 
@@ -59,8 +60,10 @@ def _number(header: dict, name: str, default: float) -> float:
 def response_from_header(header: dict, source: str = "<header>") -> CameraResponse:
     """Rebuild the :class:`CameraResponse` written by :func:`hdrio.job.output.exr_attributes`.
 
-    Level ``k`` of the stored curves is code ``k * codeMax / (levels - 1)``; codes between
-    levels are interpolated linearly in ``g`` (natural-log units). Raises
+    Level ``k`` of the stored curves is code ``k * codeMax / (levels - 1)``, or with
+    ``hdrio:responseSpacing`` ``sqrt`` code ``codeMax (k / (levels - 1))^2``
+    (:mod:`hdrio.radiometry.levels`); codes between levels are interpolated linearly in
+    ``g`` (natural-log units). Raises
     :class:`InputError` naming ``source`` when the header holds no response, or one that
     is not well formed (code range, curves of finite numbers of one length).
     """
@@ -79,7 +82,11 @@ def response_from_header(header: dict, source: str = "<header>") -> CameraRespon
     if any(curve.size != levels for curve in curves):
         raise InputError(source, "its response curves differ in length: not a response "
                                  "hdrio wrote")
-    position = np.arange(code_max + 1) * ((levels - 1) / code_max)
+    spacing = str(header.get("hdrio:responseSpacing", "even"))  # even before it was written
+    if spacing not in SPACINGS:
+        raise InputError(source, f"hdrio:responseSpacing is {spacing!r}, not one of "
+                                 f"{', '.join(SPACINGS)}: not a response hdrio wrote")
+    position = level_of(np.arange(code_max + 1), code_max, levels, spacing)
     g = np.stack([np.interp(position, np.arange(levels), curve) for curve in curves], axis=1)
     supported = np.ones_like(g, dtype=bool)
     for name, low, high in _RANGE.findall(str(header.get("hdrio:responseSupport", ""))):
@@ -90,7 +97,8 @@ def response_from_header(header: dict, source: str = "<header>") -> CameraRespon
                           parameters={"smoothing": _number(header, "hdrio:lambda", 0.0),
                                       "weighting": str(header.get("hdrio:weighting", "n/a")),
                                       "sampling": f"from {source}", "samples": 0,
-                                      "levels": levels, "source": source})
+                                      "levels": levels, "spacing": spacing,
+                                      "source": source})
 
 
 def check_response_fits(response: CameraResponse, code_max: int, channels: int) -> None:

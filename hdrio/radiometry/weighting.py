@@ -61,8 +61,7 @@ WEIGHTING_METHODS: MethodRegistry = MethodRegistry(
 )
 
 
-def weights_table(method: str, code_max: int, n: int | None = None) -> np.ndarray:
-    """``w`` evaluated at every code value ``0..code_max`` (or at ``n`` evenly spaced bins)."""
-    n = code_max + 1 if n is None else n
-    z = np.linspace(0.0, float(code_max), n)
+def weights_table(method: str, code_max: int) -> np.ndarray:
+    """``w`` evaluated at every code value ``0..code_max``."""
+    z = np.linspace(0.0, float(code_max), code_max + 1)
     return WEIGHTING_METHODS[method](z, 0.0, float(code_max))

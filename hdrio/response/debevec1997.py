@@ -40,7 +40,8 @@ import numpy as np
 
 from hdrio.errors import ResponseSolveError
 from hdrio.radiometry.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
-from hdrio.radiometry.weighting import weighting_tutorial_hat, weights_table
+from hdrio.radiometry.levels import code_of, level_of, solve_levels
+from hdrio.radiometry.weighting import WEIGHTING_METHODS, weighting_tutorial_hat
 from hdrio.response.normal_equations import (
     Debevec1997Rows,
     IllConditioned,
@@ -229,9 +230,11 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         Pixel selection (see :mod:`hdrio.response.sampling`); ``exclude`` is an
         ``(H, W)`` mask of pixels never to sample.
     levels
-        Code levels solved for. Default: every code for 8-bit (256); 1024 bins for
-        16-bit, since a 65536-unknown system would be slow and no better constrained.
-        The solved table is interpolated back to every code.
+        Code levels solved for, evenly spaced. Default
+        (:func:`hdrio.radiometry.levels.solve_levels`): every code for 8-bit (256);
+        1024 levels spaced ``sqrt-even`` for deeper codes (16-bit: evenly in ``sqrt(z)``
+        up to a quarter of the range, evenly in ``z`` above it). The solved table is
+        interpolated back to every code.
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
@@ -248,7 +251,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     ``parameters["channels_solved"]`` says how many solves ran.
     """
     code_max = stack.code_max
-    levels = levels or (code_max + 1 if code_max < 1024 else 1024)
+    levels, spacing = (levels, "even") if levels else solve_levels(code_max)
     sampler = SAMPLING_METHODS[sampling]
     indices = sampler(stack.codes, code_max, n_samples=samples or DEFAULT_SAMPLES,
                       exclude=exclude, seed=seed, n_levels=levels)
@@ -261,8 +264,15 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     if dropped is not None:
         Z[np.asarray(dropped(Z.transpose(1, 0, 2))).T] = code_max
     if levels != code_max + 1:
-        Z = np.rint(Z.astype(np.float64) * ((levels - 1) / code_max)).astype(np.int64)
-    weights = weights_table(weighting, code_max, levels)
+        Z = np.rint(level_of(Z, code_max, levels, spacing)).astype(np.int64)
+    at = code_of(levels, code_max, spacing)
+    weights = WEIGHTING_METHODS[weighting](at, 0.0, float(code_max))
+    if spacing != "even":
+        # Levels below the first evenly spaced one (64 codes of 65535) carry no weight,
+        # as the even levels had none there: the hat gives them under 0.2 % of the middle,
+        # and the curve below them (a ramp only their tiny smoothness rows pin) made the
+        # normal equations ill-conditioned (rcond under 1e-12: the SVD path, 4 s a solve).
+        weights[at < code_max / (levels - 1)] = 0.0
     anchor = levels // 2
     sample_balance = math.sqrt(indices.size / tutorial_sample_count(stack.count))
     level_smoothing = smoothing * (levels / 256) ** 1.5 * sample_balance
@@ -286,10 +296,12 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     g_levels = np.stack(tables, axis=1)
     support_levels = np.stack(supported, axis=1)
     if levels != code_max + 1:
-        position = np.arange(code_max + 1) * ((levels - 1) / code_max)
+        position = level_of(np.arange(code_max + 1), code_max, levels, spacing)
         g_full = np.stack([np.interp(position, np.arange(levels), g_levels[:, c])
                            for c in range(g_levels.shape[1])], axis=1)
         support_full = support_levels[np.rint(position).astype(np.int64)]
+        if spacing != "even":  # the gauge's level is not code_max's middle: g(z_mid) = 0
+            g_full -= g_full[(code_max + 1) // 2]
     else:
         g_full, support_full = g_levels, support_levels
     return CameraResponse(
@@ -298,6 +310,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         parameters={"smoothing": float(smoothing), "level_smoothing": float(level_smoothing),
                     "weighting": weighting,
                     "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
+                    "spacing": spacing,
                     "monotone": bool(monotone), "sample_indices": indices,
                     "channels_solved": len(solved),
                     **({} if dropped is None else {"dropped": repr(dropped)})},

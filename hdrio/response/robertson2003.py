@@ -42,6 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from hdrio.radiometry.curve import CameraResponse, monotone_non_decreasing
+from hdrio.radiometry.levels import level_of
 from hdrio.response.debevec1997 import DEFAULT_SMOOTHING, response_Debevec1997
 from hdrio.stack import exposure_columns
 
@@ -97,6 +98,7 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     anchor = (stack.code_max + 1) // 2
     g = np.array(start.log_inverse, dtype=np.float64)
     levels = int(start.parameters["levels"])
+    spacing = str(start.parameters.get("spacing", "even"))
     ran = 0
     while ran < iterations:
         ran += 1
@@ -104,7 +106,7 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         variance = observation_variance(response, stack.channel_exposures, noise)
         usable = usable_codes(response, noise)
         updated = np.stack([_update(grid[:, :, c], g[:, c], times[:, c], variance[:, c],
-                                    usable[:, c], keep, anchor, levels, monotone)
+                                    usable[:, c], keep, anchor, levels, spacing, monotone)
                             for c in range(g.shape[1])], axis=1)
         change = float(np.max(np.abs(updated - g)))
         g = updated
@@ -119,14 +121,15 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
 
 def _update(Z: np.ndarray, g: np.ndarray, times: np.ndarray, variance: np.ndarray,
             usable: np.ndarray, keep: np.ndarray | None, anchor: int, levels: int,
-            monotone: bool) -> np.ndarray:
+            spacing: str, monotone: bool) -> np.ndarray:
     """One alternation for one channel: ``Z`` ``(P, n)`` codes, ``g`` ``(codes,)``,
     ``times`` ``(P,)``, ``variance`` ``(P, codes)``, ``usable`` ``(codes,)``.
 
-    Codes are pooled into ``levels`` bins (every code its own at 8 bits; 1024 bins of
-    64 codes at 16, as Debevec's solve): each bin with enough observations moves ``g``
-    at its observations' mean code to the log of their mean ``dt_j x_i``; the correction
-    is interpolated between bins (held at the ends) and ``g(anchor) = 0`` again.
+    Codes are pooled into Debevec's solve's levels (``levels``, ``spacing``: every code
+    its own at 8 bits; :mod:`hdrio.radiometry.levels`): each bin with enough observations
+    moves ``g`` at its observations' mean code to the log of their mean ``dt_j x_i``; the
+    correction is interpolated between bins (held at the ends) and ``g(anchor) = 0``
+    again.
     """
     Z = Z.astype(np.intp)
     X = np.exp(g)
@@ -141,7 +144,7 @@ def _update(Z: np.ndarray, g: np.ndarray, times: np.ndarray, variance: np.ndarra
                          out=np.zeros_like(estimate), where=observed)
     code_max = g.size - 1
     codes = Z[observed]
-    bins = np.rint(codes * ((levels - 1) / code_max)).astype(np.intp)
+    bins = np.rint(level_of(codes, code_max, levels, spacing)).astype(np.intp)
     count = np.bincount(bins, minlength=levels)
     exposure = np.bincount(bins, weights=(times[:, None] * radiance)[observed],
                            minlength=levels)
