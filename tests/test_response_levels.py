@@ -136,3 +136,46 @@ def test_a_hand_held_linear_16_bit_ladders_exposures_agree_with_its_metadata():
     assert result.exposures.warnings("explicit") == []
     stops = np.log2(result.exposures.estimated / case.exposures)
     assert np.max(np.abs(stops)) <= 0.1, stops
+
+
+def test_a_solved_curve_is_called_linear_only_when_it_is():
+    """linear_deviation: linear 16-bit ladders solve to ln z within 0.007-0.013 (slope
+    1.002-1.004); a gamma-2.2 16-bit ladder to slope 2.19; an sRGB 8-bit one is not
+    linear either."""
+    from hdrio.radiometry.curve import linear_deviation
+
+    deviation = linear_deviation(response_Debevec1997(tripod_stack("16-bit", 0, 7).stack()))
+    assert deviation is not None and deviation <= 0.03
+    assert linear_deviation(response_Debevec1997(tripod_stack("png", 0, 7).stack())) is None
+    gamma = tripod_stack("16-bit", 0, 7)
+    codes = np.rint(65535 * (gamma.codes / 65535.0) ** (1 / 2.2)).astype(np.uint16)
+    stack = type(gamma.stack()).from_arrays(codes, gamma.exposures, code_max=65535)
+    assert linear_deviation(response_Debevec1997(stack)) is None
+
+
+def test_the_summary_names_linear_codes(tmp_path, capsys):
+    """Linear 16-bit TIFFs merged with the solved response: the summary says their curve
+    is linear and that --response linear merges them without a solve (on linear 16-bit
+    ladders 8-21 % less median error, docs/method.md); with --response linear, or
+    gamma-encoded brackets, it says nothing."""
+    from hdrio.io.write import write_image
+    from tests.conftest import run_cli
+
+    case = tripod_stack("16-bit", 0, 5, "Desk", 100, 150)
+    files = [write_image(tmp_path / f"lin_{j}.tif", frame, "uint16")
+             for j, frame in enumerate(case.codes)]
+    times = ",".join(f"{t:.9g}" for t in case.exposures)
+    hint = "--response linear merges without a solve"
+    code, out, err = run_cli(capsys, "merge", *files, "--exposures", times,
+                             "-o", tmp_path / "solved.exr")
+    assert code == 0, err
+    assert hint in out + err
+    code, out, err = run_cli(capsys, "merge", *files, "--exposures", times, "--response",
+                             "linear", "-o", tmp_path / "linear.exr")
+    assert code == 0 and hint not in out + err
+    srgb = tripod_stack("png", 0, 5, "Desk", 100, 150)
+    pngs = [write_image(tmp_path / f"srgb_{j}.png", frame, "uint8")
+            for j, frame in enumerate(srgb.codes)]
+    code, out, err = run_cli(capsys, "merge", *pngs, "--exposures", times,
+                             "-o", tmp_path / "srgb.exr")
+    assert code == 0 and hint not in out + err

@@ -23,6 +23,7 @@ from hdrio.job.options import MergeOptions
 from hdrio.job.output import saturation_rule
 from hdrio.job.result import MergeResult
 from hdrio.job.run import merge_files
+from hdrio.radiometry.curve import CameraResponse, linear_deviation
 from hdrio.tonemap import TONEMAP_METHODS
 
 
@@ -149,6 +150,19 @@ def merge_report(check: StreamingCheck, result: MergeResult, output: Path) -> Ch
                         masked_fraction=stats.masked_everywhere / stats.pixels)
 
 
+def _linear_hint(response: CameraResponse) -> list[str]:
+    """The summary's line when a solved response is a linear sensor's
+    (:func:`hdrio.radiometry.curve.linear_deviation`), else none."""
+    if response.method == "linear":
+        return []
+    deviation = linear_deviation(response)
+    if deviation is None:
+        return []
+    return [f"           the solved curve is ln z within {deviation:.3f} from 1 to 95 % of "
+            "the codes: linear codes, which --response linear merges without a solve "
+            "(and closer: docs/method.md)"]
+
+
 def _seconds(t: float) -> str:
     return f"1/{1 / t:.4g} s" if t < 1 else f"{t:.4g} s"
 
@@ -177,6 +191,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         + (" observations at or reaching the clip left out (the channels mix after it),"
            if params.get("dropped") else "")
         + f" {times['response']:.2f} s",
+        *_linear_hint(result.response),
         f"merge:     {result.options.merge}, {times['merge']:.2f} s; clipped in every "
         f"bracket {100 * stats.clipped_fraction:.2f} % ("
         + ("reconstructed" if result.highlights else "a neutral lower bound")
