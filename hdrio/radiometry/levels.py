@@ -13,10 +13,9 @@ brackets that disagreed in the shadows (docs/motion.md). In ``sqrt(z)`` a level 
 as many shot-noise standard deviations wide at every code, and those curves are within
 0.06 of ``ln z`` at code 300 and 0.014 from code 1000 up. Above the knee the levels stay
 nearly as fine as the even ones, where gamma-like curves bend at their shoulder: levels
-evenly in ``sqrt(z)``
-all the way up (128 codes apart at the top) put the truth harness's 16-bit group's
-clipped pixels 9-13 % further off, and levels evenly in ``ln z`` nearly tripled its
-error (docs/method.md)."""
+evenly in ``sqrt(z)`` all the way up (128 codes apart at the top) put the truth
+harness's 16-bit group's clipped pixels 9-13 % further off, and levels evenly in ``ln
+z`` nearly tripled its error (docs/method.md)."""
 
 from __future__ import annotations
 
