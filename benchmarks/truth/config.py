@@ -72,6 +72,7 @@ def full_design(scenes: Sequence[str] = SCENES, curves: Sequence[str] = CURVES
     * ``jpeg``: every scene with the EMoR mean curve, through JPEG quality 90;
     * ``16-bit``: three scenes (every scene when fewer than six) with the EMoR mean
       curve at 16 bits (hdrio only: OpenCV's and colour-hdri's Debevec take 8-bit);
+    * ``linear``: the same scenes at 16 bits through a linear curve (a linear TIFF);
     * ``camera``: every scene with the EMoR mean curve through every camera of
       :data:`benchmarks.truth.camera.CAMERAS` (raw clip, white balance, colour matrix)
       at both noise levels (:data:`benchmarks.truth.camera.NOISE_LEVELS`).
@@ -92,12 +93,14 @@ def full_design(scenes: Sequence[str] = SCENES, curves: Sequence[str] = CURVES
     jpeg = [StackSpec(s, typical, frames, ev, jpeg=True, group="jpeg") for s in scenes]
     deep_scenes = ("Desk", "GoldenGate", "StillLife") if set(scenes) >= set(SCENES) else scenes
     deep = [StackSpec(s, typical, frames, ev, bits=16, group="16-bit") for s in deep_scenes]
+    linear = [StackSpec(s, "linear", frames, ev, bits=16, group="linear")
+              for s in deep_scenes]
     camera = [StackSpec(s, typical, frames, ev, group="camera", camera=c, noise=n)
               for s in scenes for c in CAMERAS for n in NOISE_LEVELS]
-    return tuple(core + ladder + jpeg + deep + camera)
+    return tuple(core + ladder + jpeg + deep + linear + camera)
 
 
-GROUPS = ("core", "ladder", "jpeg", "16-bit", "camera")
+GROUPS = ("core", "ladder", "jpeg", "16-bit", "linear", "camera")
 
 
 def full_config(scene_paths: dict[str, str] | None = None, width: int | None = 400,

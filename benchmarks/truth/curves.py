@@ -74,7 +74,10 @@ def emor_blocks() -> dict[str, np.ndarray]:
 
 
 def load_curve(name: str) -> Curve:
-    """``dorfN`` (row N of DoRF's ``201_CRF_data.mat``) or ``emor-f0`` (EMoR's mean curve)."""
+    """``dorfN`` (row N of DoRF's ``201_CRF_data.mat``), ``emor-f0`` (EMoR's mean curve)
+    or ``linear`` (a linear sensor's codes: a linear TIFF from a raw converter)."""
+    if name == "linear":
+        return Curve(name, np.array([0.0, 1.0]), np.array([0.0, 1.0]))
     if name.startswith("dorf"):
         irradiance, brightness = _dorf()
         row = int(name[4:])
@@ -82,4 +85,4 @@ def load_curve(name: str) -> Curve:
     if name == "emor-f0":
         blocks = emor_blocks()
         return Curve(name, blocks["E"], np.clip(blocks["f0"], 0.0, 1.0))
-    raise KeyError(f"unknown curve {name!r}: use dorf0..dorf200 or emor-f0")
+    raise KeyError(f"unknown curve {name!r}: use dorf0..dorf200, emor-f0 or linear")

@@ -13,6 +13,7 @@ GROUPS = (("core", "Core: 8-bit, 7 frames 2 EV apart, every scene x every curve"
           ("jpeg", "JPEG: 8-bit through JPEG quality 90 (4:2:0), 7 frames 2 EV apart"),
           ("16-bit", "16-bit, 7 frames 2 EV apart (OpenCV and colour-hdri take 8-bit only: "
                      "hdrio alone)"),
+          ("linear", "Linear 16-bit (a linear TIFF), 7 frames 2 EV apart: hdrio alone"),
           ("camera", "Camera-like: raw clip, white balance and a real camera's colour matrix "
                      "(4 cameras x 2 noise levels), EMoR mean curve, 7 frames 2 EV apart"))
 DEFAULT = "hdrio default"

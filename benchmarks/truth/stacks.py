@@ -39,7 +39,7 @@ class StackSpec:
         8-bit codes round-tripped through JPEG at :data:`JPEG_QUALITY`.
     group
         Which part of the design the stack belongs to (``core``, ``ladder``, ``jpeg``,
-        ``16-bit``, ``camera``), for the report.
+        ``16-bit``, ``linear``, ``camera``), for the report.
     camera, noise
         Rendered through that camera's raw clip, white balance and colour matrix
         (:data:`benchmarks.truth.camera.CAMERAS`) at that noise level

@@ -82,10 +82,10 @@ def monotone_non_decreasing(g: np.ndarray, anchor: int) -> np.ndarray:
 LINEAR_SLOPE = 0.02
 """A solved curve is linear (:func:`linear_deviation`) when ``g`` fitted as ``a + b ln z``
 over codes 1-95 % of the range has ``|b - 1|`` at most this in every channel (linear
-16-bit ladders solved: 1.002-1.004; a gamma-2.2 one: 2.19)..."""
+16-bit ladders solved: 0.999-1.001; a gamma-2.2 one: 2.19)..."""
 
 LINEAR_WITHIN = 0.03
-"""... and no code there is further than this from the fit (linear ladders: 0.007-0.013)."""
+"""... and no code there is further than this from the fit (linear ladders: 0.003-0.012)."""
 
 
 def linear_deviation(response: CameraResponse) -> float | None:
@@ -93,7 +93,7 @@ def linear_deviation(response: CameraResponse) -> float | None:
     range, the largest over channels, when it is linear (:data:`LINEAR_SLOPE`,
     :data:`LINEAR_WITHIN`); ``None`` when it is not. Such codes are a linear sensor's
     (a linear TIFF), and ``--response linear`` merges them without a solve and with less
-    error (8-21 % at the median on linear 16-bit ladders, docs/method.md)."""
+    error (3-15 % at the median on linear 16-bit ladders, docs/method.md)."""
     z = np.arange(response.code_max + 1, dtype=np.float64)
     inside = (z >= 0.01 * response.code_max) & (z <= 0.95 * response.code_max)
     design = np.stack([np.ones(np.count_nonzero(inside)), np.log(z[inside])], axis=1)

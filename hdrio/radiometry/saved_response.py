@@ -61,8 +61,8 @@ def response_from_header(header: dict, source: str = "<header>") -> CameraRespon
     """Rebuild the :class:`CameraResponse` written by :func:`hdrio.job.output.exr_attributes`.
 
     Level ``k`` of the stored curves is code ``k * codeMax / (levels - 1)``, or where
-    ``hdrio:responseSpacing`` is ``sqrt-even`` the code
-    :func:`hdrio.radiometry.levels.code_of` gives; codes between levels are interpolated
+    ``hdrio:responseSpacing`` is ``sqrt`` code ``codeMax (k / (levels - 1))^2``
+    (:func:`hdrio.radiometry.levels.code_of`); codes between levels are interpolated
     linearly in ``g`` (natural-log units). Raises
     :class:`InputError` naming ``source`` when the header holds no response, or one that
     is not well formed (code range, curves of finite numbers of one length).

@@ -232,9 +232,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     levels
         Code levels solved for, evenly spaced. Default
         (:func:`hdrio.radiometry.levels.solve_levels`): every code for 8-bit (256);
-        1024 levels spaced ``sqrt-even`` for deeper codes (16-bit: evenly in ``sqrt(z)``
-        up to a quarter of the range, evenly in ``z`` above it). The solved table is
-        interpolated back to every code.
+        1024 levels evenly spaced in ``sqrt(z)`` for deeper codes (16-bit). The solved
+        table is interpolated back to every code.
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
