@@ -281,7 +281,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         if key not in solved:
             touched = np.bincount(Z[:, :, c].reshape(-1),
                                   weights=weights[Z[:, :, c]].reshape(-1), minlength=levels) > 0
-            _check_coverage(touched)
+            _check_coverage(touched, None if spacing == "even" else at)
             g, _ = g_solve_Debevec1997(Z[:, :, c], stack.log_exposures, level_smoothing,
                                        weights)
             determined = _determined_levels(weights, touched)
@@ -320,20 +320,28 @@ MIN_SUPPORTED_LEVELS = 16
 MAX_GAP_FRACTION = 1 / 2
 
 
-def _check_coverage(touched: np.ndarray) -> None:
+def _check_coverage(touched: np.ndarray, at: np.ndarray | None = None) -> None:
     """Refuse samples that pin g at only a few tones (a grey card, a single pixel).
 
     Debevec's solve needs the samples to chain the code range together; with a handful
     of tones (under 16 levels), or a gap of half the range between data, the smoothness
-    term alone would invent the curve between them.
+    term alone would invent the curve between them. ``at``: the code of each level when
+    they are not evenly spaced (:mod:`hdrio.radiometry.levels`), whose gaps are measured
+    in codes (half of ``sqrt`` levels lie in the range's bottom quarter: a 12-bit
+    ladder's samples 537 levels apart were codes 135 and 2045, 47 % of its range).
     """
     levels = np.flatnonzero(touched)
-    gap = int(np.max(np.diff(levels))) if levels.size > 1 else touched.size
-    if levels.size < MIN_SUPPORTED_LEVELS or gap > MAX_GAP_FRACTION * touched.size:
+    if at is None:
+        gap = int(np.max(np.diff(levels))) if levels.size > 1 else touched.size
+        wide, span = gap > MAX_GAP_FRACTION * touched.size, f"{gap} of {touched.size}"
+    else:
+        gap = float(np.max(np.diff(at[levels]))) if levels.size > 1 else float(at[-1])
+        wide, span = gap > MAX_GAP_FRACTION * at[-1], f"{gap:.0f} codes of {at[-1]:.0f}"
+    if levels.size < MIN_SUPPORTED_LEVELS or wide:
         raise ResponseSolveError(
             f"the samples show too few distinct tones to recover a response ({levels.size} "
-            f"code levels, largest gap {gap} of {touched.size}): shoot a scene with more "
-            "tonal variety or more brackets, or use a saved response"
+            f"code levels, largest gap {span}): shoot a scene with more tonal variety or "
+            "more brackets, or use a saved response"
         )
 
 
