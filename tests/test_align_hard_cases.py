@@ -254,9 +254,8 @@ def test_a_response_is_not_re_solved_across_a_gap_registration_leaves(monkeypatc
     bracket between them: the green and blue curves came out with 3.4 times the true log
     range, and the merge was 78 % off at the median, against 0.8 % with --align off.
     Such a sample is not solved on (hdrio.align.resolve.unlinked): the response solved
-    as read is kept. Bound: 2x the
-    --align off merge's median error (measured 1.16 % against 0.78 %: the warped brackets
-    are resampled)."""
+    as read is kept. Bound: 2x the --align off merge's median error (measured 1.16 %
+    against 0.78 %: the warped brackets are resampled)."""
     import hdrio.align.registration as registration
     from hdrio.tools.synthetic import radiance_error, well_exposed
 

@@ -16,6 +16,7 @@ from hdrio.merge.saturation import ClipPolicy, clip_policy
 from hdrio.merge.weighted_mean import merge_brackets
 from hdrio.radiometry.cliptest import clip_tables, dropped_observations
 from hdrio.radiometry.noise import NoiseModel
+from hdrio.skips import srgb_decoded
 from hdrio.stack import ExposureStack
 from hdrio.tools.synthetic import gamma_inverse_response, gamma_response, render_brackets
 
@@ -279,8 +280,7 @@ def sky_edge_hue(result) -> np.ndarray:
     def preview(radiance):  # the 8-bit preview, back to linear light
         encoded = np.round(render_preview(radiance.astype(np.float32), "reinhard-global",
                                           result.options.colourspace, result.unseen) * 255)
-        v = encoded / 255
-        return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+        return srgb_decoded(encoded / 255)
 
     clipped = ndimage.binary_opening(np.all(codes[count // 2] == top, axis=-1))
     labels, _ = ndimage.label(clipped)
