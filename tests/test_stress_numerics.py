@@ -233,7 +233,7 @@ def test_16bit_is_solved_on_1024_binned_levels():
     codes = render_brackets(log_uniform_scene(exposures), exposures, bit_depth=16)
     response = solve_and_check(codes, exposures, 16, samples=300)
     assert response.parameters["levels"] == 1024
-    assert response.parameters["spacing"] == "sqrt"  # hdrio/radiometry/levels.py
+    assert response.parameters["spacing"] == "toe"  # a gamma curve: hdrio/radiometry/levels.py
     assert response.log_inverse.shape == (65536, 1)
 
 

@@ -47,6 +47,7 @@ from hdrio.radiometry.noise import NoiseModel, noise_encoding
 from hdrio.radiometry.noise_fit import fit_noise
 from hdrio.radiometry.saved_response import check_response_fits
 from hdrio.response import RESPONSE_METHODS
+from hdrio.response.debevec1997 import deep_spacing
 from hdrio.skips import classify
 from hdrio.stack import ExposureStack
 
@@ -136,7 +137,10 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress,
     method = "linear" if is_raw_stack(prepared.stack) else options.response
     say(f"camera response: {method}" + ("" if method == "linear"
                                         else f", lambda {options.smoothing:g}"))
-    extra = {"solve_identical_once": "channels" in plan.skips} if method != "linear" else {}
+    extra = {} if method == "linear" else {
+        "solve_identical_once": "channels" in plan.skips,
+        # decided once, on the brackets as read: re-solves read warped samples
+        "spacing": deep_spacing(prepared.stack, options.smoothing, options.weighting)}
 
     def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
         stops = None if filtered is None else stops_of(stack, prepared.stack, filtered)

@@ -1,9 +1,16 @@
 """The code levels a response is solved at and stored at.
 
 Up to 1024 codes (8-bit input, 10-bit), every code is a level. Deeper codes are pooled
-into :data:`DEEP_LEVELS` levels evenly spaced in ``sqrt(z)`` (``sqrt``: 0.06 codes apart
-at the bottom of a 16-bit range, 128 at the top), where every level is about as many
-shot-noise standard deviations wide.
+into :data:`DEEP_LEVELS` levels, spaced one of two ways:
+
+* ``toe`` (the solve's first spacing, :func:`solve_levels`): evenly in ``sqrt(z)`` in
+  the bottom :data:`TOE` of the range and evenly in ``z`` above it, the level density
+  the larger of the two (continuous at the join: 0.28 codes apart at the bottom of a
+  16-bit range, 8.5 at code 64, 68 from code 4096 up);
+* ``sqrt``: evenly in ``sqrt(z)`` over the whole range (0.06 codes apart at the bottom
+  of a 16-bit range, 128 at the top), every level about as many shot-noise standard
+  deviations wide. Debevec's solve takes it when the first solve's curve is linear (a
+  linear TIFF's codes, :func:`hdrio.response.debevec1997.response_Debevec1997`).
 
 Until stop 52 they were evenly spaced in ``z`` (64 codes a level). Debevec's smoothness
 term penalises ``g''`` per level, and a linear sensor's ``g = ln z`` bends hardest
@@ -14,7 +21,11 @@ sqrt(z)`` bends 350 times less at code 100, and those curves are within 0.04 of 
 at code 300 and 0.02 from code 1000 up. Other spacings were measured and not kept
 (docs/method.md): evenly in ``ln z`` nearly tripled the truth harness's 16-bit error;
 ``sqrt(z)`` up to a quarter of the range and even above it was better on its gamma-like
-16-bit curves but 35 % worse on linear ones.
+16-bit curves but 35 % worse on linear ones. ``sqrt`` for every curve (stop 52) was 3-25 %
+worse than even levels on curves with a toe or a shoulder (DoRF rows 0, 50, 200: a
+validation set of six scenes, two ladders each), and ``toe`` is within 1 % of the best
+of the two on every curve but a linear one, where ``sqrt`` is 14 % better
+(docs/method.md).
 """
 
 from __future__ import annotations
@@ -24,15 +35,25 @@ import numpy as np
 DEEP_LEVELS = 1024
 """Levels of a response solved for more than 1024 codes."""
 
-SPACINGS = ("even", "sqrt")
+SPACINGS = ("even", "sqrt", "toe")
 """How levels sit on the code axis: ``even`` (level ``k`` is code ``k code_max / (n -
-1)``; every code a level when ``n = code_max + 1``) or ``sqrt`` (level ``k`` is code
-``code_max (k / (n - 1))^2``)."""
+1)``; every code a level when ``n = code_max + 1``), ``sqrt`` (level ``k`` is code
+``code_max (k / (n - 1))^2``) or ``toe`` (``sqrt`` below :data:`TOE` of the range,
+``even`` above it)."""
+
+TOE = 1 / 16
+"""The fraction of the code range that ``toe`` levels space evenly in ``sqrt(z)``."""
 
 
 def solve_levels(code_max: int) -> tuple[int, str]:
-    """``(levels, spacing)`` a response of codes ``0 .. code_max`` is solved at."""
-    return (code_max + 1, "even") if code_max < DEEP_LEVELS else (DEEP_LEVELS, "sqrt")
+    """``(levels, spacing)`` a response of codes ``0 .. code_max`` is solved at first."""
+    return (code_max + 1, "even") if code_max < DEEP_LEVELS else (DEEP_LEVELS, "toe")
+
+
+def _toe_axis(x: np.ndarray) -> np.ndarray:
+    """``toe``'s level axis at ``x`` (codes over ``code_max``): ``2 sqrt(TOE x)`` below
+    ``TOE``, then ``x + TOE`` (its slope 1 at the join, as ``sqrt``'s is there)."""
+    return 2.0 * np.sqrt(TOE * np.minimum(x, TOE)) + np.maximum(x - TOE, 0.0)
 
 
 def level_of(codes, code_max: int, levels: int, spacing: str = "even") -> np.ndarray:
@@ -40,11 +61,17 @@ def level_of(codes, code_max: int, levels: int, spacing: str = "even") -> np.nda
     codes = np.asarray(codes, dtype=np.float64)
     if spacing == "sqrt":
         return (levels - 1) * np.sqrt(codes / code_max)
+    if spacing == "toe":
+        return (levels - 1) * _toe_axis(codes / code_max) / (1.0 + TOE)
     return codes * ((levels - 1) / code_max)
 
 
 def code_of(levels: int, code_max: int, spacing: str = "even") -> np.ndarray:
     """The code (float64) each of ``levels`` levels stands for."""
+    k = np.arange(levels, dtype=np.float64) / (levels - 1)
     if spacing == "sqrt":
-        return code_max * (np.arange(levels, dtype=np.float64) / (levels - 1)) ** 2
+        return code_max * k**2
+    if spacing == "toe":
+        t = k * (1.0 + TOE)  # back from the axis: t = 2 sqrt(TOE x) below 2 TOE, x + TOE above
+        return code_max * np.where(t < 2 * TOE, t * t / (4 * TOE), t - TOE)
     return np.linspace(0.0, float(code_max), levels)

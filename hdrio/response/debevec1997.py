@@ -39,7 +39,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hdrio.errors import ResponseSolveError
-from hdrio.radiometry.curve import CameraResponse, fill_unsupported, monotone_non_decreasing
+from hdrio.radiometry.curve import (
+    CameraResponse,
+    fill_unsupported,
+    log_fit,
+    monotone_non_decreasing,
+)
 from hdrio.radiometry.levels import code_of, level_of, solve_levels
 from hdrio.radiometry.weighting import WEIGHTING_METHODS, weighting_tutorial_hat
 from hdrio.response.normal_equations import (
@@ -50,6 +55,7 @@ from hdrio.response.normal_equations import (
 from hdrio.response.sampling import (
     DEFAULT_SAMPLES,
     SAMPLING_METHODS,
+    matched_quantiles,
     sample_codes,
     tutorial_sample_count,
 )
@@ -58,6 +64,14 @@ if TYPE_CHECKING:
     import scipy.sparse as sp
 
 DEFAULT_SMOOTHING = 50.0
+
+SQRT_LEVELS_SLOPE = 0.1
+"""Deep codes whose curve, solved on the brackets' matched quantiles
+(:func:`deep_spacing`), has a slope against ``ln z`` within this of 1 in every channel
+are a linear sensor's, and are solved at ``sqrt`` levels, not ``toe`` ones
+(:mod:`hdrio.radiometry.levels`). Measured: the truth harness's linear ladders 0.99-1.00,
+hand-held linear ladders (camera shake, a sun) 0.95-1.09; its other curves 0.66-0.70
+(DoRF 120), 1.21-1.24 (DoRF 200), 1.41-1.45 (EMoR's mean) and steeper."""
 _REFINED = 1e-12  # a refinement step this small (relative to g's range) ends refinement
 _SVD_RCOND = 1e-13  # below this singular value ratio, the response is undetermined
 _UNDETERMINED = (
@@ -203,7 +217,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                          samples: int | None = None, exclude: np.ndarray | None = None,
                          seed: int = 0, levels: int | None = None, monotone: bool = True,
                          solve_identical_once: bool = True,
-                         dropped: Callable[[np.ndarray], np.ndarray] | None = None):
+                         dropped: Callable[[np.ndarray], np.ndarray] | None = None,
+                         spacing: str | None = None):
     """Recover a :class:`~hdrio.radiometry.curve.CameraResponse` from an exposure stack.
 
     Parameters
@@ -230,10 +245,14 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         Pixel selection (see :mod:`hdrio.response.sampling`); ``exclude`` is an
         ``(H, W)`` mask of pixels never to sample.
     levels
-        Code levels solved for, evenly spaced. Default
-        (:func:`hdrio.radiometry.levels.solve_levels`): every code for 8-bit (256);
-        1024 levels evenly spaced in ``sqrt(z)`` for deeper codes (16-bit). The solved
-        table is interpolated back to every code.
+        Code levels solved for. Default (:func:`hdrio.radiometry.levels.solve_levels`):
+        every code for 8-bit (256); 1024 for deeper codes (16-bit). The solved table is
+        interpolated back to every code.
+    spacing
+        How the levels sit on the code axis (:data:`hdrio.radiometry.levels.SPACINGS`).
+        Default: evenly when ``levels`` is given, else :func:`deep_spacing`'s (``toe``
+        for deep codes, ``sqrt`` where they are a linear sensor's). A job decides it once
+        on the brackets as read and passes it to every re-solve.
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
@@ -250,7 +269,9 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     ``parameters["channels_solved"]`` says how many solves ran.
     """
     code_max = stack.code_max
-    levels, spacing = (levels, "even") if levels else solve_levels(code_max)
+    if spacing is None:
+        spacing = "even" if levels else deep_spacing(stack, smoothing, weighting)
+    levels = levels or solve_levels(code_max)[0]
     sampler = SAMPLING_METHODS[sampling]
     indices = sampler(stack.codes, code_max, n_samples=samples or DEFAULT_SAMPLES,
                       exclude=exclude, seed=seed, n_levels=levels)
@@ -259,13 +280,65 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
             "no usable samples: every pixel is clipped (0 or saturated) in all but at most "
             "one bracket, or excluded"
         )
-    Z = sample_codes(stack.codes, indices)
+    codes = sample_codes(stack.codes, indices)
     if dropped is not None:
-        Z[np.asarray(dropped(Z.transpose(1, 0, 2))).T] = code_max
+        codes[np.asarray(dropped(codes.transpose(1, 0, 2))).T] = code_max
+    sample_balance = math.sqrt(indices.size / tutorial_sample_count(stack.count))
+    level_smoothing = smoothing * (levels / 256) ** 1.5 * sample_balance
+    g_full, support_full, channels_solved = _solve_at(
+        codes, stack.log_exposures, code_max, levels, level_smoothing,
+        WEIGHTING_METHODS[weighting], monotone, solve_identical_once, spacing)
+    return CameraResponse(
+        log_inverse=g_full, code_max=code_max, supported=support_full,
+        method="Debevec1997",
+        parameters={"smoothing": float(smoothing), "level_smoothing": float(level_smoothing),
+                    "weighting": weighting,
+                    "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
+                    "spacing": spacing,
+                    "monotone": bool(monotone), "sample_indices": indices,
+                    "channels_solved": channels_solved,
+                    **({} if dropped is None else {"dropped": repr(dropped)})},
+    )
+
+
+def deep_spacing(stack, smoothing: float = DEFAULT_SMOOTHING,
+                 weighting: str = "Debevec1997") -> str:
+    """How the levels of ``stack``'s response are spaced
+    (:func:`hdrio.radiometry.levels.solve_levels`): ``even`` (every code) up to 10-bit
+    codes; for deeper ones ``sqrt`` where they are a linear sensor's (a linear TIFF from
+    a raw converter), else ``toe``.
+
+    A linear sensor's: Debevec's solve at 256 ``toe`` levels on the brackets' matched
+    quantiles (:func:`hdrio.response.sampling.matched_quantiles`, which camera shake does
+    not blur: the pixel samples of an unregistered hand-held ladder gave slopes
+    0.77-1.23) has a slope against ``ln z`` within :data:`SQRT_LEVELS_SLOPE` of 1 in
+    every channel. A solve that the quantiles cannot support says ``toe``."""
+    levels, spacing = solve_levels(stack.code_max)
+    if spacing != "toe":
+        return spacing
+    samples = matched_quantiles(stack.codes)
+    level_smoothing = smoothing * math.sqrt(
+        samples.shape[0] / tutorial_sample_count(stack.count))
+    try:
+        g, _, _ = _solve_at(samples, stack.log_exposures, stack.code_max, 256,
+                            level_smoothing, WEIGHTING_METHODS[weighting], True, True, "toe")
+    except ResponseSolveError:
+        return "toe"
+    slopes, _ = log_fit(g, stack.code_max)
+    return "sqrt" if np.all(np.abs(slopes - 1.0) <= SQRT_LEVELS_SLOPE) else "toe"
+
+def _solve_at(codes: np.ndarray, log_exposures: np.ndarray, code_max: int, levels: int,
+              level_smoothing: float, weighting: Callable, monotone: bool,
+              solve_identical_once: bool, spacing: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """Solve each channel of the samples' ``codes`` ``(N, P, C)`` at ``levels`` levels
+    spaced ``spacing`` (:mod:`hdrio.radiometry.levels`) with lambda ``level_smoothing``:
+    ``g`` and its support at every code, and how many channels were solved (identical
+    ones once)."""
+    Z = codes
     if levels != code_max + 1:
         Z = np.rint(level_of(Z, code_max, levels, spacing)).astype(np.int64)
     at = code_of(levels, code_max, spacing)
-    weights = WEIGHTING_METHODS[weighting](at, 0.0, float(code_max))
+    weights = weighting(at, 0.0, float(code_max))
     if spacing != "even":
         # Levels below the first evenly spaced one (64 codes of 65535) carry no weight,
         # as the even levels had none there: the hat gives them under 0.2 % of the middle,
@@ -273,8 +346,6 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         # normal equations ill-conditioned (rcond under 1e-12: the SVD path, 4 s a solve).
         weights[at < code_max / (levels - 1)] = 0.0
     anchor = levels // 2
-    sample_balance = math.sqrt(indices.size / tutorial_sample_count(stack.count))
-    level_smoothing = smoothing * (levels / 256) ** 1.5 * sample_balance
     tables, supported, solved = [], [], {}
     for c in range(Z.shape[2]):
         key = Z[:, :, c].tobytes() if solve_identical_once else c
@@ -282,8 +353,7 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
             touched = np.bincount(Z[:, :, c].reshape(-1),
                                   weights=weights[Z[:, :, c]].reshape(-1), minlength=levels) > 0
             _check_coverage(touched, None if spacing == "even" else at)
-            g, _ = g_solve_Debevec1997(Z[:, :, c], stack.log_exposures, level_smoothing,
-                                       weights)
+            g, _ = g_solve_Debevec1997(Z[:, :, c], log_exposures, level_smoothing, weights)
             determined = _determined_levels(weights, touched)
             g = fill_unsupported(g, determined)
             if monotone:
@@ -294,26 +364,15 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
         supported.append(touched)
     g_levels = np.stack(tables, axis=1)
     support_levels = np.stack(supported, axis=1)
-    if levels != code_max + 1:
-        position = level_of(np.arange(code_max + 1), code_max, levels, spacing)
-        g_full = np.stack([np.interp(position, np.arange(levels), g_levels[:, c])
-                           for c in range(g_levels.shape[1])], axis=1)
-        support_full = support_levels[np.rint(position).astype(np.int64)]
-        if spacing != "even":  # the gauge's level is not code_max's middle: g(z_mid) = 0
-            g_full -= g_full[(code_max + 1) // 2]
-    else:
-        g_full, support_full = g_levels, support_levels
-    return CameraResponse(
-        log_inverse=g_full, code_max=code_max, supported=support_full,
-        method="Debevec1997",
-        parameters={"smoothing": float(smoothing), "level_smoothing": float(level_smoothing),
-                    "weighting": weighting,
-                    "sampling": sampling, "samples": int(indices.size), "levels": int(levels),
-                    "spacing": spacing,
-                    "monotone": bool(monotone), "sample_indices": indices,
-                    "channels_solved": len(solved),
-                    **({} if dropped is None else {"dropped": repr(dropped)})},
-    )
+    if levels == code_max + 1:
+        return g_levels, support_levels, len(solved)
+    position = level_of(np.arange(code_max + 1), code_max, levels, spacing)
+    g_full = np.stack([np.interp(position, np.arange(levels), g_levels[:, c])
+                       for c in range(g_levels.shape[1])], axis=1)
+    support_full = support_levels[np.rint(position).astype(np.int64)]
+    if spacing != "even":  # the gauge's level is not code_max's middle: g(z_mid) = 0
+        g_full -= g_full[(code_max + 1) // 2]
+    return g_full, support_full, len(solved)
 
 
 MIN_SUPPORTED_LEVELS = 16

@@ -65,8 +65,8 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
                            seed: int = 0, levels: int | None = None, monotone: bool = True,
                            solve_identical_once: bool = True,
                            iterations: int = DEFAULT_ITERATIONS,
-                           dropped: Callable[[np.ndarray], np.ndarray] | None = None
-                           ) -> CameraResponse:
+                           dropped: Callable[[np.ndarray], np.ndarray] | None = None,
+                           spacing: str | None = None) -> CameraResponse:
     """Debevec's response refined by maximum likelihood (module docstring).
 
     The parameters other than ``iterations`` are
@@ -83,7 +83,8 @@ def response_Robertson2003(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     start = response_Debevec1997(stack, smoothing, weighting=weighting, sampling=sampling,
                                  samples=samples, exclude=exclude, seed=seed, levels=levels,
                                  monotone=monotone,
-                                 solve_identical_once=solve_identical_once, dropped=dropped)
+                                 solve_identical_once=solve_identical_once, dropped=dropped,
+                                 spacing=spacing)
     grid = noise_grid(stack.codes)  # (P, n, C)
     if dropped is not None:  # saturated codes are never usable
         grid[np.asarray(dropped(grid))] = stack.code_max

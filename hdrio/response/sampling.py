@@ -173,6 +173,22 @@ SAMPLING_METHODS: MethodRegistry = MethodRegistry(
 )
 
 
+def matched_quantiles(codes: np.ndarray, count: int = DEFAULT_SAMPLES) -> np.ndarray:
+    """Each bracket's codes at ``count`` evenly spaced quantiles, channel by channel:
+    ``(count, P, C)`` integer codes, sample first like :func:`sample_codes`.
+
+    A response is monotone, so on a still scene the pixel at a quantile of one bracket
+    is the pixel at the same quantile of every other: these are samples of one scene
+    point each that no camera shake or mover misplaces (a histogram moves little when
+    the frame does). Read on the candidate grid (:func:`hdrio.io.staging.candidate_stride`).
+    """
+    height, width = codes.shape[1:3]
+    grid = strided_copy(codes, candidate_stride(height, width))
+    at = (np.arange(count) + 0.5) / count
+    pixels = grid.reshape(grid.shape[0], -1, grid.shape[-1])
+    return np.rint(np.quantile(pixels, at, axis=1)).astype(np.int64)
+
+
 def sample_codes(codes: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Code values at flat pixel ``indices``: shape ``(N, P, C)`` (sample, bracket, channel)."""
     return gather_pixels(codes, indices).transpose(1, 0, 2)
