@@ -3,14 +3,14 @@
 Up to 1024 codes (8-bit input, 10-bit), every code is a level. Deeper codes are pooled
 into :data:`DEEP_LEVELS` levels, spaced one of two ways:
 
-* ``toe`` (the solve's first spacing, :func:`solve_levels`): evenly in ``sqrt(z)`` in
-  the bottom :data:`TOE` of the range and evenly in ``z`` above it, the level density
-  the larger of the two (continuous at the join: 0.28 codes apart at the bottom of a
-  16-bit range, 8.5 at code 64, 68 from code 4096 up);
+* ``toe`` (:func:`solve_levels`'): evenly in ``sqrt(z)`` in the bottom :data:`TOE` of
+  the range and evenly in ``z`` above it, the level density the larger of the two
+  (continuous at the join: 0.28 codes apart at the bottom of a 16-bit range, 8.5 at
+  code 64, 68 from code 4096 up);
 * ``sqrt``: evenly in ``sqrt(z)`` over the whole range (0.06 codes apart at the bottom
   of a 16-bit range, 128 at the top), every level about as many shot-noise standard
-  deviations wide. Debevec's solve takes it when the first solve's curve is linear (a
-  linear TIFF's codes, :func:`hdrio.response.debevec1997.response_Debevec1997`).
+  deviations wide: for a linear sensor's codes (a linear TIFF from a raw converter),
+  which :func:`hdrio.response.debevec1997.deep_spacing` tells from the others.
 
 Until stop 52 they were evenly spaced in ``z`` (64 codes a level). Debevec's smoothness
 term penalises ``g''`` per level, and a linear sensor's ``g = ln z`` bends hardest
@@ -21,11 +21,11 @@ sqrt(z)`` bends 350 times less at code 100, and those curves are within 0.04 of 
 at code 300 and 0.02 from code 1000 up. Other spacings were measured and not kept
 (docs/method.md): evenly in ``ln z`` nearly tripled the truth harness's 16-bit error;
 ``sqrt(z)`` up to a quarter of the range and even above it was better on its gamma-like
-16-bit curves but 35 % worse on linear ones. ``sqrt`` for every curve (stop 52) was 3-25 %
-worse than even levels on curves with a toe or a shoulder (DoRF rows 0, 50, 200: a
-validation set of six scenes, two ladders each), and ``toe`` is within 1 % of the best
-of the two on every curve but a linear one, where ``sqrt`` is 14 % better
-(docs/method.md).
+16-bit curves but 35 % worse on linear ones. ``sqrt`` for every curve (stop 52) was 3-18 %
+worse than even levels on curves with a toe or a shoulder (DoRF rows 0, 50, 150, 200;
+``python -m benchmarks.levels``: six scenes, two ladders each), and ``toe`` is the best
+of the three or within 2.1 % of it on every curve but a linear one, where ``sqrt``'s
+error is 14 % lower (docs/method.md).
 """
 
 from __future__ import annotations

@@ -313,7 +313,7 @@ def deep_spacing(stack, smoothing: float = DEFAULT_SMOOTHING,
     not blur: the pixel samples of an unregistered hand-held ladder gave slopes
     0.77-1.23) has a slope against ``ln z`` within :data:`SQRT_LEVELS_SLOPE` of 1 in
     every channel. A solve that the quantiles cannot support says ``toe``."""
-    levels, spacing = solve_levels(stack.code_max)
+    spacing = solve_levels(stack.code_max)[1]
     if spacing != "toe":
         return spacing
     samples = matched_quantiles(stack.codes)
@@ -326,6 +326,7 @@ def deep_spacing(stack, smoothing: float = DEFAULT_SMOOTHING,
         return "toe"
     slopes, _ = log_fit(g, stack.code_max)
     return "sqrt" if np.all(np.abs(slopes - 1.0) <= SQRT_LEVELS_SLOPE) else "toe"
+
 
 def _solve_at(codes: np.ndarray, log_exposures: np.ndarray, code_max: int, levels: int,
               level_smoothing: float, weighting: Callable, monotone: bool,

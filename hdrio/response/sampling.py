@@ -178,9 +178,10 @@ def matched_quantiles(codes: np.ndarray, count: int = DEFAULT_SAMPLES) -> np.nda
     ``(count, P, C)`` integer codes, sample first like :func:`sample_codes`.
 
     A response is monotone, so on a still scene the pixel at a quantile of one bracket
-    is the pixel at the same quantile of every other: these are samples of one scene
-    point each that no camera shake or mover misplaces (a histogram moves little when
-    the frame does). Read on the candidate grid (:func:`hdrio.io.staging.candidate_stride`).
+    is the pixel at the same quantile of every other: samples of one scene point each
+    that camera shake does not misplace (a histogram moves little when the frame does;
+    noise widens it, so a curve solved on them is biased where the noise is large).
+    Read on the candidate grid (:func:`hdrio.io.staging.candidate_stride`).
     """
     height, width = codes.shape[1:3]
     grid = strided_copy(codes, candidate_stride(height, width))
