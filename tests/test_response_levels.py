@@ -47,7 +47,7 @@ def test_toe_levels_are_sqrt_in_the_shadows_and_even_above():
     assert steps[join - 2] == pytest.approx(steps[join], rel=0.02)  # no jump at the join
 
 
-@pytest.mark.parametrize("curve,bound", [("dorf120", 0.012), ("dorf200", 0.05),
+@pytest.mark.parametrize("curve,bound", [("dorf120", 0.012), ("dorf200", 0.044),
                                          ("emor-f0", 0.0075)])
 def test_16_bit_curves_with_a_shoulder_or_a_toe_are_solved_at_toe_levels(
         shared_data, monkeypatch, curve, bound):
@@ -55,8 +55,9 @@ def test_16_bit_curves_with_a_shoulder_or_a_toe_are_solved_at_toe_levels(
     renderer, 7 x 2 EV): the response's RMS error (stops, codes 4-96 % of the range)
     against the true curve. Levels evenly in sqrt(z) over the whole range (stop 52's
     choice for every deep curve) gave Desk 0.041 / 0.059 / 0.0036 stop, even levels
-    0.031 / 0.045 / 0.0071; ``toe`` levels 0.0062 / 0.042 / 0.0037. Bounds: about the
-    measured value with a fifth to spare, below both others where they are worse."""
+    0.031 / 0.045 / 0.0071; ``toe`` levels 0.0062 / 0.042 / 0.0037. Bounds: below both
+    others where they are worse (DoRF 200: 0.044, between toe's 0.042 and even's 0.045;
+    the render is seeded, so the solve is the same on every run)."""
     from benchmarks.truth.curves import load_curve
     from benchmarks.truth.metrics import response_rms_stops
     from benchmarks.truth.scenes import read_scene
