@@ -134,6 +134,22 @@ def test_the_levels_benchmark_forces_each_spacing(shared_data):
     assert summary(even, "linear")["stacks"] == summary(auto, "linear")["stacks"] == 2
 
 
+def test_linear_16_bit_files_without_exposures_get_sqrt_levels(tmp_path):
+    """Linear 16-bit TIFFs with no exposure metadata (``--exposures-from-data``): the
+    spacing is decided on the first stack the job solves, whose exposures are inferred
+    from the pixels. Decided on the files as read, whose placeholder exposures are 1, 2,
+    3, 4, 5, it was ``toe``."""
+    from hdrio.io.brackets import read_brackets
+    from hdrio.io.write import write_image
+
+    case = tripod_stack("16-bit", 0, 5, "Desk", 100, 150)
+    files = [write_image(tmp_path / f"linear_{j}.tif", frame, "uint16")
+             for j, frame in enumerate(case.codes)]
+    stack = read_brackets(files, infer_exposures=True)
+    result = merge_stack(stack, MergeOptions(exposures_from_data=True))
+    assert result.response.parameters["spacing"] == "sqrt"
+
+
 def test_a_toe_spaced_response_reads_back_from_the_header():
     """A gamma-encoded 16-bit ladder is solved at ``toe`` levels; the header says so and
     reads back as the merge's response. Measured: 3.3e-6 at most from code 64 up; bound

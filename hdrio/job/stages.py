@@ -137,15 +137,17 @@ def response_solver(prepared: Prepared, plan: MergePlan, say: Progress,
     method = "linear" if is_raw_stack(prepared.stack) else options.response
     say(f"camera response: {method}" + ("" if method == "linear"
                                         else f", lambda {options.smoothing:g}"))
-    extra = {} if method == "linear" else {
-        "solve_identical_once": "channels" in plan.skips,
-        # decided once, on the brackets as read: re-solves read warped samples
-        "spacing": deep_spacing(prepared.stack, options.smoothing, options.weighting)}
+    extra = {"solve_identical_once": "channels" in plan.skips} if method != "linear" else {}
 
     def solve(stack: ExposureStack, exclude: np.ndarray | None) -> CameraResponse:
         stops = None if filtered is None else stops_of(stack, prepared.stack, filtered)
         if stops is not None and np.count_nonzero(stops == 0) >= 2:
             stack = unfiltered(stack, stops)  # a filter's cast would bend g
+        if method != "linear" and "spacing" not in extra:
+            # Decided once, on the first stack solved: the brackets as read, with the
+            # exposures the solve uses (inferred ones where the files have none; the
+            # placeholders before them would mislead it). Re-solves read warped samples.
+            extra["spacing"] = deep_spacing(stack, options.smoothing, options.weighting)
 
         def solved_with(dropped: SolveFilter | None = None) -> CameraResponse:
             return RESPONSE_METHODS[method](

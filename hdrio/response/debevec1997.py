@@ -251,8 +251,9 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     spacing
         How the levels sit on the code axis (:data:`hdrio.radiometry.levels.SPACINGS`).
         Default: evenly when ``levels`` is given, else :func:`deep_spacing`'s (``toe``
-        for deep codes, ``sqrt`` where they are a linear sensor's). A job decides it once
-        on the brackets as read and passes it to every re-solve.
+        for deep codes, ``sqrt`` where they are a linear sensor's). A job decides it once,
+        on the first stack it solves, and passes it to every re-solve
+        (:func:`hdrio.job.stages.response_solver`).
     monotone
         Make each channel's ``g`` non-decreasing (a real response cannot fall).
 
