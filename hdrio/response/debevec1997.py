@@ -72,6 +72,7 @@ are a linear sensor's, and are solved at ``sqrt`` levels, not ``toe`` ones
 (:mod:`hdrio.radiometry.levels`). Measured: the truth harness's linear ladders 0.99-1.00,
 hand-held linear ladders (camera shake, a sun) 0.95-1.09; its other curves 0.66-0.70
 (DoRF 120), 1.21-1.24 (DoRF 200), 1.41-1.45 (EMoR's mean) and steeper."""
+
 _REFINED = 1e-12  # a refinement step this small (relative to g's range) ends refinement
 _SVD_RCOND = 1e-13  # below this singular value ratio, the response is undetermined
 _UNDETERMINED = (
