@@ -19,6 +19,7 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
+from hdrio.io.orientation import turned_text
 from hdrio.job.options import MergeOptions
 from hdrio.job.output import saturation_rule
 from hdrio.job.result import MergeResult
@@ -179,12 +180,14 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     relative = inferred and result.exposures.exif is None
     span = (f"relative exposures {stack.exposures[0]:.4g} .. {stack.exposures[-1]:.4g}"
             if relative else f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])}")
+    upright = turned_text(stack.files, stack.metadata)
     lines = [
         f"brackets:  {stack.count} x {width}x{height} ({channels} ch, {bits}-bit), {span} "
         f"(exposures from {stack.exposure_sources[0]}"
         + (", then from the data" if result.exposures and result.exposures.used
            and not inferred else "")
         + f"), read in {times['read']:.2f} s",
+        *([f"upright:   as the EXIF says, {upright}"] if upright else []),
         *([f"exposures: {inferred}"] if inferred else []),
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
         f"{params['weighting']} weighting, {params['samples']} samples ({params['sampling']}),"

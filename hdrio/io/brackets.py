@@ -21,6 +21,7 @@ from hdrio.io.exposure import (
     relative_exif_exposures,
 )
 from hdrio.io.native import quiet_native_stderr, size_thread_pools
+from hdrio.io.orientation import UPRIGHT, orientation_of, place, upright_size
 from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
 from hdrio.io.staging import codes_buffer, release
@@ -39,7 +40,11 @@ exposures are placeholders until :func:`hdrio.merge.ladder.infer_exposures`."""
 
 @dataclass(frozen=True)
 class BracketHeader:
-    """What a bracket's header says, read without decoding its pixels."""
+    """What a bracket's header says, read without decoding its pixels.
+
+    ``height`` and ``width`` are the upright image's, as the bracket is decoded
+    (``orientation``: the EXIF orientation turned upright, :mod:`hdrio.io.orientation`;
+    1 when the pixels are read as stored)."""
 
     path: Path
     height: int
@@ -48,15 +53,22 @@ class BracketHeader:
     code_max: int
     dtype: type
     exif: dict
+    orientation: int = UPRIGHT
 
     @property
     def shape(self) -> tuple[int, int, int]:
         return self.height, self.width, self.channels
 
+    @property
+    def stored_size(self) -> tuple[int, int]:
+        """``(height, width)`` as the file stores its rows."""
+        return upright_size(self.height, self.width, self.orientation)
+
 
 @contextlib.contextmanager
-def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
-    """Open ``path`` with OpenImageIO, check it holds code values, yield its header.
+def _open(path: Path, upright: bool = True) -> Iterator[tuple[object, BracketHeader]]:
+    """Open ``path`` with OpenImageIO, check it holds code values, yield its header (of
+    the image turned upright by its EXIF orientation, unless ``upright`` is false).
 
     The libraries' own stderr chatter is silenced for the whole block (decoding included).
     """
@@ -78,9 +90,14 @@ def _open(path: Path) -> Iterator[tuple[object, BracketHeader]]:
                     path, f"{base} pixels are not bracket code values; use 8- or 16-bit images"
                 )
             dtype, code_max = _CODE_TYPES[base]
-            header = BracketHeader(path, spec.height, spec.width,
-                                   3 if spec.nchannels >= 3 else 1, code_max, dtype,
-                                   _exif_of(spec))
+            orientation = orientation_of(spec.get_int_attribute("Orientation", UPRIGHT)) \
+                if upright else UPRIGHT
+            exif = _exif_of(spec)
+            if orientation != UPRIGHT:
+                exif["Orientation"] = orientation
+            header = BracketHeader(path, *upright_size(spec.height, spec.width, orientation),
+                                   3 if spec.nchannels >= 3 else 1, code_max, dtype, exif,
+                                   orientation)
             yield image, header
         finally:
             image.close()
@@ -110,45 +127,50 @@ def read_exif(path: str | Path) -> dict:
     return read_header(path).exif
 
 
-def read_header(path: str | Path) -> BracketHeader:
-    """The header of one bracket (size, channels, code range, EXIF), pixels not decoded."""
-    with _open(Path(path)) as (_, header):
+def read_header(path: str | Path, upright: bool = True) -> BracketHeader:
+    """The header of one bracket (size, channels, code range, EXIF), pixels not decoded;
+    its size upright (``upright``: :func:`read_brackets`)."""
+    with _open(Path(path), upright) as (_, header):
         return header
 
 
 def _decode_into(image, header: BracketHeader, out: np.ndarray,
                  decoded: Callable[[int, int], None] | None = None) -> tuple[int, int]:
-    """Decode ``image`` into ``out`` ``(H, W, C)`` a band of rows at a time (no full
-    copy); ``decoded(top, bottom)`` after each band (a staged bracket gives its pages
-    back there). Returns the smallest and largest code, counted band by band."""
+    """Decode ``image`` into ``out`` ``(H, W, C)`` (upright) a band of stored rows at a
+    time (no full copy); ``decoded(top, bottom)`` after each band of an image stored
+    upright (a staged bracket gives its pages back there; a turned one's bands cross
+    every row). Returns the smallest and largest code, counted band by band."""
     base = str(np.dtype(header.dtype))
+    height, width = header.stored_size
     low, high = None, None
-    for top in range(0, header.height, _ROWS_PER_READ):
-        bottom = min(header.height, top + _ROWS_PER_READ)
+    for top in range(0, height, _ROWS_PER_READ):
+        bottom = min(height, top + _ROWS_PER_READ)
         rows = image.read_scanlines(0, 0, top, bottom, 0, 0, header.channels, base)
         if rows is None or image.has_error:
             raise InputError(header.path, "cannot decode image "
                              f"({library_message(image.geterror) or 'read failed'})")
-        band = np.asarray(rows).reshape(bottom - top, header.width, header.channels)
-        out[top:bottom] = band
+        band = np.asarray(rows).reshape(bottom - top, width, header.channels)
+        place(band, out, top, header.orientation)
         band_low, band_high = code_range(band)
         low = band_low if low is None else min(low, band_low)
         high = band_high if high is None else max(high, band_high)
-        if decoded is not None:
+        if decoded is not None and header.orientation == UPRIGHT:
             decoded(top, bottom)
     return low, high
 
 
-def read_codes(path: str | Path) -> tuple[np.ndarray, int, dict]:
-    """Decode one bracket: ``(codes HxWxC, code_max, exif)`` with stored code values.
+def read_codes(path: str | Path, upright: bool = True) -> tuple[np.ndarray, int, dict]:
+    """Decode one bracket: ``(codes HxWxC, code_max, exif)`` with stored code values,
+    turned upright by the file's EXIF orientation unless ``upright`` is false
+    (:mod:`hdrio.io.orientation`).
 
     Only 8- and 16-bit integer encodings are brackets; alpha and extra channels are
     dropped (RGB or a single grey channel are kept). ``exif`` holds ``ExposureTime``,
     ``FNumber``, ``ISO``, ``DateTimeOriginal``, ``ICCDescription`` and ``ExifColorSpace``
-    where the file has them.
+    where the file has them, and ``Orientation`` where the pixels were turned upright.
     """
     path = Path(path)
-    with _open(path) as (image, header):
+    with _open(path, upright) as (image, header):
         codes = np.empty(header.shape, dtype=header.dtype)
         _decode_into(image, header, codes)
     return codes, header.code_max, header.exif
@@ -163,6 +185,7 @@ def read_brackets(
     skip_brackets: bool = True,
     stop_when_covered: bool = False,
     infer_exposures: bool = False,
+    upright: bool = True,
 ) -> ExposureStack:
     """Read brackets into an :class:`ExposureStack` sorted by increasing exposure.
 
@@ -187,6 +210,11 @@ def read_brackets(
     stop_when_covered
         Stop decoding once a bracket has every code value well exposed, and keep only it
         (for a merge with a saved response: :mod:`hdrio.skips`, ``covered``).
+    upright
+        Turn each bracket upright by its EXIF orientation (:mod:`hdrio.io.orientation`;
+        brackets of one set stored in different orientations then match); false reads
+        the pixels as stored, as Blender's image loader does. Camera RAW files are always
+        turned (LibRaw's flip).
 
     Brackets are decoded from the middle of the exposure ladder outwards, as many at a
     time as the process has threads (:func:`hdrio.parallel.threads`), each straight into
@@ -212,7 +240,7 @@ def read_brackets(
     # Headers first: sizes and exposures are checked before any pixel is decoded, and
     # each bracket is then decoded straight into its slot of one array, in exposure
     # order (peak memory: the stack plus one band of rows).
-    headers = [read_header(path) for path in paths]
+    headers = [read_header(path, upright) for path in paths]
     first = headers[0]
     for header in headers[1:]:
         if header.shape != first.shape or header.code_max != first.code_max:
@@ -238,7 +266,7 @@ def read_brackets(
 
     def decode(position: int) -> None:
         j = order[position]
-        with _open(paths[j]) as (image, header):
+        with _open(paths[j], upright) as (image, header):
             if header.shape != first.shape or header.code_max != first.code_max:
                 raise InputError(paths[j], "changed while being read")
             # each band's pages given back once written: a bracket decoding holds one band

@@ -1,6 +1,7 @@
 """Reading ``--mask`` files: which pixels of which bracket the merge must not use.
 
-A mask is an 8- or 16-bit image the size of the brackets; a pixel is *excluded* where
+A mask is an 8- or 16-bit image the size of the brackets (both turned upright by their
+EXIF orientation, :mod:`hdrio.io.orientation`); a pixel is *excluded* where
 its first channel is below half the code range (black), kept where it is white. The
 ``--mask`` values map to brackets so:
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from hdrio import __version__
 from hdrio.cms.colour_stage import colour_attributes, output_radiance
+from hdrio.io.orientation import UPRIGHT, turned
 from hdrio.io.paths import resolved, with_relative_sources
 from hdrio.io.write import HALF_MAX, write_exr
 from hdrio.job.result import MergeResult
@@ -75,6 +76,9 @@ def exr_attributes(result: MergeResult) -> dict[str, object]:
                                         + (", then reconstructed" if result.highlights
                                            else "") + ")")
     attributes.update(capture_attributes(stack))
+    orientations = turned(stack.metadata)
+    if any(o != UPRIGHT for o in orientations):  # the pixels are upright; the files were not
+        attributes["hdrio:sourceOrientation"] = [str(o) for o in orientations]
     if result.exposures is not None:
         attributes.update(result.exposures.attributes())
     if result.nd is not None:

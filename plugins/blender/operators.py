@@ -84,7 +84,9 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
         # hdrio merge's defaults, so the baked node merges as `hdrio merge` does.
         options = MergeOptions()
         try:
-            stack = read_brackets(paths, exposures=node.bracket_exposures())
+            # As stored, as Blender loads the node's images (it ignores EXIF orientation):
+            # the highlight gain below is an image the node lays over them.
+            stack = read_brackets(paths, exposures=node.bracket_exposures(), upright=False)
             result = merge_stack(stack, options)
             gain = None
             if node.highlights == "reconstruct":  # hdrio's own, as `--highlights reconstruct`

@@ -129,6 +129,40 @@ def test_merge_node_reconstructs_highlights_as_hdrio_merge(shared_data, tmp_path
     assert_matches_command("clip", clipped, paths, tmp_path)
 
 
+def test_merge_node_reads_brackets_as_blender_loads_them(shared_data, tmp_path):
+    # A portrait set as a phone writes it: landscape pixels tagged "turned 90 degrees
+    # clockwise" (EXIF orientation 6). Blender loads them as stored; `hdrio merge` turns
+    # them upright. The node's Solve reads them as Blender does, so its highlight gain
+    # (an image laid over the node's inputs) has their size and place.
+    import OpenImageIO as oiio
+
+    paths = []
+    for source in sorted(shared_data("frobisher_001").glob("*.jpg")):
+        buffer = oiio.ImageBuf(str(source))
+        buffer.specmod().attribute("Orientation", 6)
+        paths.append(tmp_path / f"{source.stem}.tif")  # lossless: the same codes
+        assert buffer.write(str(paths[-1]), "uint8")
+    image = bpy.data.images.load(str(paths[0]), check_existing=False)
+    stored = (image.size[1], image.size[0])
+    assert stored == (426, 640)  # as stored: Blender ignores the orientation
+    scene = bpy.context.scene
+    tree = clean_compositor(scene)
+    node = merge_node_with(tree, paths)
+    node.highlights = "reconstruct"
+    assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
+        "FINISHED"}
+    gain = node.highlight_gain()
+    assert (gain.size[1], gain.size[0]) == stored
+    result = merge_stack(read_brackets(paths, upright=False),
+                         MergeOptions(highlights="reconstruct"))
+    merged = render_to_exr(scene, node.outputs[0], tmp_path / "stored.exr", stored)
+    difference = relative_difference(merged, result.radiance)
+    print(f"as stored, reconstructed: p99 {np.percentile(difference, 99):.1e}")
+    assert np.percentile(difference, 99) <= 1e-3  # the parity bound of the tests above
+    upright = read_brackets(paths)
+    assert upright.codes.shape[1:3] == stored[::-1]  # hdrio merge's, for comparison
+
+
 def test_solve_refuses_placeholder_exposures_in_one_line(write_brackets):
     # PNGs without EXIF and names without times: the node's exposures are placeholders.
     paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
