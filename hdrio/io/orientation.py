@@ -31,18 +31,25 @@ DESCRIPTIONS = {1: "as stored", 2: "mirrored left to right", 3: "turned 180 degr
 """What turning a bracket upright did, per EXIF orientation (the summary's words)."""
 
 
+TURNS = {1: (False, False, False), 2: (False, False, True), 3: (False, True, True),
+         4: (False, True, False), 5: (True, False, False), 6: (True, False, True),
+         7: (True, True, True), 8: (True, True, False)}
+"""Each orientation as ``(transpose, flip rows, flip columns)``: the stored image
+transposed first (when asked), then flipped, is the upright one."""
+
+
 def orientation_of(value) -> int:
     """An EXIF ``Orientation`` as read (``None``, or out of range: as stored)."""
     try:
         orientation = int(value)
     except (TypeError, ValueError):
         return UPRIGHT
-    return orientation if orientation in DESCRIPTIONS else UPRIGHT
+    return orientation if orientation in TURNS else UPRIGHT
 
 
 def swaps_axes(orientation: int) -> bool:
     """Whether turning upright exchanges height and width (5-8)."""
-    return orientation >= 5
+    return TURNS[orientation][0]
 
 
 def upright_size(height: int, width: int, orientation: int) -> tuple[int, int]:
@@ -52,42 +59,20 @@ def upright_size(height: int, width: int, orientation: int) -> tuple[int, int]:
 
 def stored_view(upright: np.ndarray, orientation: int) -> np.ndarray:
     """A view of ``upright`` ``(H, W, ...)`` with the stored image's shape, such that
-    writing the stored pixels into it leaves ``upright`` holding them turned upright."""
-    if orientation == 2:
-        return upright[:, ::-1]
-    if orientation == 3:
-        return upright[::-1, ::-1]
-    if orientation == 4:
-        return upright[::-1]
-    if orientation == 5:
-        return upright.swapaxes(0, 1)
-    if orientation == 6:
-        return np.rot90(upright, 1)
-    if orientation == 7:
-        return np.rot90(upright.swapaxes(0, 1), 2)
-    if orientation == 8:
-        return np.rot90(upright, -1)
-    return upright
+    writing the stored pixels into it leaves ``upright`` holding them turned upright
+    (the inverse of :func:`upright_view`)."""
+    swap, flip_rows, flip_columns = TURNS[orientation]
+    view = upright[::-1] if flip_rows else upright
+    view = view[:, ::-1] if flip_columns else view
+    return view.swapaxes(0, 1) if swap else view
 
 
 def upright_view(stored: np.ndarray, orientation: int) -> np.ndarray:
-    """``stored`` ``(H, W, ...)`` as a view turned upright (the inverse of
-    :func:`stored_view`)."""
-    if orientation == 2:
-        return stored[:, ::-1]
-    if orientation == 3:
-        return stored[::-1, ::-1]
-    if orientation == 4:
-        return stored[::-1]
-    if orientation == 5:
-        return stored.swapaxes(0, 1)
-    if orientation == 6:
-        return np.rot90(stored, -1)
-    if orientation == 7:
-        return np.rot90(stored, 2).swapaxes(0, 1)
-    if orientation == 8:
-        return np.rot90(stored, 1)
-    return stored
+    """``stored`` ``(H, W, ...)`` as a view turned upright (:data:`TURNS`)."""
+    swap, flip_rows, flip_columns = TURNS[orientation]
+    view = stored.swapaxes(0, 1) if swap else stored
+    view = view[::-1] if flip_rows else view
+    return view[:, ::-1] if flip_columns else view
 
 
 def place(band: np.ndarray, upright: np.ndarray, top: int, orientation: int) -> None:
