@@ -194,6 +194,32 @@ def test_frobisher_clipped_everywhere_is_neutral_and_masked(tmp_path):
     assert report.clipped_fraction == pytest.approx(fraction)
 
 
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_a_resaved_frobisher_mixes_whichever_way_its_sample_falls(tmp_path, orientation):
+    # Frobisher re-saved by OpenImageIO (a re-encode, as an editor's rotation does),
+    # turned by each EXIF orientation, which moves the strided sample the policy is
+    # decided on. At the limits alone the mixing measured 0.81-0.86 in three of the
+    # eight (blue's limit 255 instead of 253-254: a channel just under a limit set too
+    # high hid the mixing), and the shortest bracket's partly clipped window was kept
+    # channel by channel: yellow-green and pink bands in the preview. Measured with
+    # LIMIT_SLACK: 5.21-8.88, every one mixed (MIXING_SHIFT 0.9).
+    import OpenImageIO as oiio
+
+    from hdrio.io.brackets import read_brackets
+    from hdrio.io.orientation import stored_view
+    from hdrio.job.run import merge_stack
+
+    paths = []
+    for source in _frobisher():
+        paths.append(tmp_path / source.name)
+        assert oiio.ImageBuf(str(source)).write(str(paths[-1]))
+    stack = read_brackets(paths)
+    codes = np.ascontiguousarray(np.stack([stored_view(c, orientation) for c in stack.codes]))
+    turned = ExposureStack.from_arrays(codes, stack.exposures, files=stack.files)
+    policy = merge_stack(turned).statistics.policy
+    assert policy.neutral and policy.mixing > 2.0
+
+
 def test_clip_mask_round_trip_and_check_summary(tmp_path):
     import OpenImageIO as oiio
 
