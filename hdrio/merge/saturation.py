@@ -84,17 +84,17 @@ edges' fringe grew from 12 pixels to 22 (tests/test_merge_cliptest.py)."""
 
 LIMIT_SLACK = 2
 """Codes below the limits at which the mixing is measured too, the largest measure
-counting. A limit is the white level less a noise margin (:func:`~hdrio.merge.clipping.
-saturation_limits`) set by the noise fit at the top codes, which a different sample of
-the same stack moves by a code or two; and a channel 1-2 codes under a limit that
-should have been lower reads as unclipped in the measure's clean group, where a mixing
-camera's bent codes then hide the mixing. Frobisher re-saved by OpenImageIO, its sample
-turned by each of the 8 EXIF orientations: 4.54, 0.81, 3.79, 0.86, 5.13, 5.41, 6.39, 0.84
-at the limits alone (below :data:`MIXING_SHIFT` wherever blue's came out 255, not
-253-254), 5.21-8.88 now; the original frobisher 3.76-5.78, now 5.63-8.04. Stacks that
-keep their channels apart are where they were: canal 0.727, memorial 0.39, ``ghost/``
-0, the truth harness's renders at most 0.53 (0.52); the camera-like stacks' decisions
-and pixels the same."""
+counting. A limit is the white level less a noise margin
+(:func:`~hdrio.merge.clipping.saturation_limits`) set by the noise fit at the top codes,
+which a different sample of the same stack moves by a code or two; and a channel 1-2
+codes under a limit that should have been lower reads as unclipped in the measure's
+clean group, where a mixing camera's bent codes then hide the mixing. Frobisher re-saved
+by OpenImageIO, its sample turned by each of the 8 EXIF orientations: 4.54, 0.81, 3.79,
+0.86, 5.13, 5.41, 6.39, 0.84 at the limits alone (below :data:`MIXING_SHIFT` wherever
+blue's came out 255, not 253-254), 5.21-8.88 now; the original frobisher 3.76-5.78, now
+5.63-8.04. Stacks that keep their channels apart are where they were: canal 0.727,
+memorial 0.39, ``ghost/`` 0, the truth harness's renders at most 0.53 (0.52); the
+camera-like stacks' decisions and pixels the same."""
 
 
 @dataclass(frozen=True)
@@ -280,7 +280,8 @@ def clip_policy(policy: str, codes: np.ndarray, response: CameraResponse,
     :data:`~hdrio.radiometry.cliptest.APART_SIGMAS` where not), the shortest bracket's
     partly clipped observations dropped whole where
     :func:`~hdrio.merge.clipping.channel_mixing` (inside clips,
-    :func:`~hdrio.merge.clipping.clip_interior`) exceeds 1; without ``exposures``
+    :func:`~hdrio.merge.clipping.clip_interior`; the largest within :data:`LIMIT_SLACK`
+    codes of the limits) exceeds :data:`MIXING_SHIFT`; without ``exposures``
     (seconds) or with one bracket, as ``safe``. ``noise`` ``None``: the codes' rounding alone.
     ``exclude`` (``(P, H, W)`` or ``(H, W)``, ``--mask`` and ``--exclude-color``): pixels
     of the sample where some bracket is excluded are left out of every measure
@@ -357,10 +358,10 @@ def solve_filter(policy: str, stack: ExposureStack, response: CameraResponse, *,
     Where the merge drops partly clipped observations whole, the solve should not fit
     the curve to them: ``safe`` always, and ``auto`` on a stack that shows its channels
     mixed after the clip (:func:`~hdrio.merge.clipping.channel_mixing` inside clips
-    above 1, measured with ``response``, the solve without the filter), where they are
-    biased in every channel: on camera-like brackets through the 5D Mark II's matrix the
-    green curve of a solve that kept them fell 0.2 in ``ln`` at the top codes, and the
-    hue error's p99 on clip-transition pixels tripled. A raw channel that clipped can
+    above :data:`MIXING_SHIFT`, measured with ``response``, the solve without the filter),
+    where they are biased in every channel: on camera-like brackets through the 5D Mark
+    II's matrix the green curve of a solve that kept them fell 0.2 in ``ln`` at the top
+    codes, and the hue error's p99 on clip-transition pixels tripled. A raw channel that clipped can
     leave every output channel below its limit (a colour matrix's positive
     off-diagonal terms), so the observations that the next shorter bracket says reach a
     limit go too (:attr:`SolveFilter.reach`, by ``response``: the red curve was 5 % off
