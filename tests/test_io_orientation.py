@@ -71,9 +71,8 @@ def test_a_bracket_reads_upright_in_every_orientation(tmp_path, orientation, kin
 def _ladder(exposures, size=(40, 60)) -> list[np.ndarray]:
     from hdrio.tools.synthetic import render_brackets
 
-    return list(render_brackets(ramp_radiance(*size) * np.linspace(0.5, 1.5, size[1])[None, :,
-                                                                                         None],
-                                list(exposures)))
+    radiance = ramp_radiance(*size) * np.linspace(0.5, 1.5, size[1])[None, :, None]
+    return list(render_brackets(radiance, list(exposures)))
 
 
 def test_a_portrait_set_merges_upright_whatever_each_file_stores(tmp_path, capsys):

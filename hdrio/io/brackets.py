@@ -42,9 +42,7 @@ exposures are placeholders until :func:`hdrio.merge.ladder.infer_exposures`."""
 class BracketHeader:
     """What a bracket's header says, read without decoding its pixels.
 
-    ``height`` and ``width`` are the upright image's, as the bracket is decoded
-    (``orientation``: the EXIF orientation turned upright, :mod:`hdrio.io.orientation`;
-    1 when the pixels are read as stored)."""
+    ``height`` and ``width`` are the upright image's, as the bracket is decoded."""
 
     path: Path
     height: int
@@ -53,11 +51,16 @@ class BracketHeader:
     code_max: int
     dtype: type
     exif: dict
-    orientation: int = UPRIGHT
 
     @property
     def shape(self) -> tuple[int, int, int]:
         return self.height, self.width, self.channels
+
+    @property
+    def orientation(self) -> int:
+        """The EXIF orientation reading turns upright (:mod:`hdrio.io.orientation`; 1
+        when the pixels are read as stored): ``exif["Orientation"]``, where it says so."""
+        return orientation_of(self.exif.get("Orientation"))
 
     @property
     def stored_size(self) -> tuple[int, int]:
@@ -96,8 +99,7 @@ def _open(path: Path, upright: bool = True) -> Iterator[tuple[object, BracketHea
             if orientation != UPRIGHT:
                 exif["Orientation"] = orientation
             header = BracketHeader(path, *upright_size(spec.height, spec.width, orientation),
-                                   3 if spec.nchannels >= 3 else 1, code_max, dtype, exif,
-                                   orientation)
+                                   3 if spec.nchannels >= 3 else 1, code_max, dtype, exif)
             yield image, header
         finally:
             image.close()
