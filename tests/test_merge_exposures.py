@@ -476,3 +476,96 @@ def test_exposures_the_data_put_out_of_order_are_an_error_naming_the_file():
         exposures_from_data(stack, response, True)
     _, _, check = exposures_from_data(stack, response, False)  # only checked: named
     assert check.warnings("explicit")
+
+
+def test_the_exposure_slope_is_the_datas_steps_over_the_metadatas():
+    """The Theil-Sen slope: a response that does not fit every step (0.55 of them here)
+    shows in it, one wrong bracket does not (a median of the pairwise slopes), and two
+    brackets have no slope (one step cannot tell a wrong response from a wrong
+    exposure)."""
+    from hdrio.merge.exposure_check import exposure_slope
+
+    meta = np.log([1.0, 4.0, 16.0, 64.0, 256.0])
+    data = 0.55 * meta + 2.0
+    data[1] += 0.8
+    assert exposure_slope(data, meta) == pytest.approx(0.55, abs=1e-12)
+    assert np.isnan(exposure_slope(data[:2], meta[:2]))
+
+
+def _response_misfit(stack, **options):
+    """The merge's check of its exposures, and the line it says of its response."""
+    check = merge_stack(stack, MergeOptions(**options)).exposures
+    return check, check.response_misfit()
+
+
+@pytest.mark.parametrize("encoding, fits", [("16-bit", True), ("png", False)])
+def test_the_linear_response_is_checked_against_the_brackets(encoding, fits):
+    """The generator's tripod ladder (7 x 2 EV, exact exposures): its linear 16-bit codes
+    fit the linear response (slope measured 0.999), its sRGB PNG codes do not (0.478)
+    and are named. The bound (SLOPE_BOUND, 0.8-1.25) sits between; a solved response
+    fits either (it fits the metadata's steps: 0.999-1.000)."""
+    from hdrio.merge.exposure_check import SLOPE_BOUND
+    from tests.hard_cases import tripod_stack
+
+    case = tripod_stack(encoding=encoding)
+    check, misfit = _response_misfit(case.stack(), response="linear")
+    assert (misfit is None) == fits
+    assert (abs(np.log(check.slope)) <= np.log(SLOPE_BOUND)) == fits, check.slope
+    if not fits:
+        assert misfit.startswith("the brackets do not fit the linear response "
+                                 "(--response linear): through it their exposure steps "
+                                 f"measure {check.slope:.2f}x the metadata's")
+        assert "sRGB" in misfit
+    solved, misfit = _response_misfit(case.stack())
+    assert misfit is None and solved.response == ""
+    assert abs(solved.slope - 1) < 0.02, solved.slope  # measured within 0.001
+
+
+def test_a_response_that_does_not_fit_frobisher_is_named(shared_data, tmp_path, capsys):
+    """frobisher's sRGB JPEGs through --response linear merge with seams where the weights
+    pass from one bracket to the next; the command says so (slope measured 0.589), the
+    chain too, and so does --response-from an EXR holding that linear response. The
+    default, and --response-from an EXR of the default's solved curve, say nothing."""
+    from hdrio.io.header import read_header
+
+    files = sorted(shared_data("frobisher_001").glob("IMG_*.jpg"))
+    said = "the brackets do not fit the linear response (--response linear)"
+    code, _, err = run(capsys, "merge", *files, "--response", "linear", "-o",
+                       tmp_path / "linear.exr")
+    assert code == 0 and f"hdrio merge: warning: {said}: through it their exposure " \
+        "steps measure 0.59x the metadata's" in err, err
+    assert float(read_header(tmp_path / "linear.exr")["hdrio:exposuresSlope"]) < 0.8
+    code, _, err = run(capsys, *files, "--response", "linear", "--merge", "-o",
+                       tmp_path / "chain.exr")
+    assert code == 0 and f"hdrio: warning: {said}" in err, err
+    code, _, err = run(capsys, "merge", *files, "--response-from", tmp_path / "linear.exr",
+                       "-o", tmp_path / "read.exr")
+    assert code == 0 and "the brackets do not fit the response read from linear.exr " \
+        "(--response-from)" in err, err
+    code, _, err = run(capsys, "merge", *files, "-o", tmp_path / "solved.exr")
+    assert code == 0 and "do not fit" not in err, err
+    slope = float(read_header(tmp_path / "solved.exr")["hdrio:exposuresSlope"])
+    assert abs(slope - 1) < 0.02, slope  # measured 1.003
+    code, _, err = run(capsys, "merge", *files, "--response-from", tmp_path / "solved.exr",
+                       "-o", tmp_path / "again.exr")
+    assert code == 0 and "do not fit" not in err, err
+
+
+@pytest.mark.slow
+def test_every_real_stack_is_checked_against_the_linear_response(shared_data):
+    """Every real stack of ../shared/data is display-encoded: through the linear response
+    their steps measured 0.51-0.61 (memorial 0.513, frobisher 0.589, ghost/ 0.597, the
+    canal 0.611) and each is named; solved, 0.989-1.003 (the canal registered first),
+    none named. A phone-like night stack of JPEGs (tests/hard_cases.py) 0.73, named."""
+    from benchmarks.noise_model import real_stacks
+    from tests.hard_cases import night_stack
+
+    stacks = [(name, stack, options) for name, stack, options in real_stacks()]
+    stacks.append(("night", night_stack().stack(), MergeOptions()))
+    for name, stack, options in stacks:
+        option_fields = {f: getattr(options, f) for f in ("exclude_colour",)}
+        check, misfit = _response_misfit(stack, response="linear", **option_fields)
+        assert misfit is not None and check.slope < 0.8, (name, check.slope)
+        if name != "night":
+            solved, misfit = _response_misfit(stack, **option_fields)
+            assert misfit is None and abs(solved.slope - 1) < 0.02, (name, solved.slope)

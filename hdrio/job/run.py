@@ -73,6 +73,8 @@ def run_plan(stack: ExposureStack, plan: MergePlan, progress: Progress | None = 
                                                     calibration or resolve, owned, say)
     prepared, response, exposure_check = stages.registered_exposures(
         prepared, response, plan, solve, motion, exposure_check, calibration, say)
+    exposure_check = stages.with_given_response(exposure_check, plan, prepared.stack,
+                                                given=solve is None)
     stack, nd_report = stages.nd_stage(prepared.stack, response, prepared.filtered)
     skipped.warp = motion.alignment is not None and not motion.warped
     clock.lap("align")

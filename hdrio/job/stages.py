@@ -281,6 +281,24 @@ def exposure_calibration(prepared: Prepared, plan: MergePlan, solve: Solve | Non
     return ExposureCalibration(solve, start_response(prepared.stack, plan, None))
 
 
+def with_given_response(check: ExposureCheck | None, plan: MergePlan, stack: ExposureStack,
+                        given: bool) -> ExposureCheck | None:
+    """``check`` naming the response it measured through where that response was not
+    solved from the brackets (``given``: ``--response-from``, or a caller's; ``--response
+    linear`` on brackets that are not camera RAW), so that it can say when the brackets
+    do not fit it (:meth:`~hdrio.merge.exposure_check.ExposureCheck.response_misfit`)."""
+    options = plan.options
+    if given:
+        words = (f"the response read from {Path(options.response_from).name} "
+                 "(--response-from)" if options.response_from is not None
+                 else "the response given")
+    elif options.response == "linear" and not is_raw_stack(stack):
+        words = "the linear response (--response linear)"
+    else:
+        return check
+    return None if check is None else replace(check, response=words)
+
+
 def registered_exposures(prepared: Prepared, response: CameraResponse, plan: MergePlan,
                          solve: Solve | None, motion: Motion, check: ExposureCheck | None,
                          calibration: ExposureCalibration | None = None,

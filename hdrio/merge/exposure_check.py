@@ -54,6 +54,16 @@ MIN_OVERLAP = 200
 """Observations (pixel-channels) a pair of brackets must share to be compared."""
 PRIOR_WEIGHT = 1e-3
 """Weight of the metadata's ratio of neighbours, against ``sqrt(overlap)`` for data."""
+SLOPE_BOUND = 1.25
+"""Through a response not solved from the brackets (``--response linear``, a saved one),
+their exposure steps measuring more than this times the metadata's, or less than its
+inverse (:func:`exposure_slope`), say that the response does not fit them
+(:meth:`ExposureCheck.response_misfit`). Measured at stop 55
+(``tests/test_merge_exposures.py``): linear 16-bit brackets through the linear response
+0.986-0.999 (the generator's tripod and hand-held ladders); sRGB-encoded brackets
+through it 0.51-0.61 (memorial, frobisher, ``ghost/``, the canal), 0.48 (a generated
+PNG tripod ladder), 0.73 (a phone-like night stack of JPEGs); a response solved from
+the brackets 0.989-1.003, as it fits the metadata's steps."""
 
 
 def compared_codes(response: CameraResponse) -> tuple[int, int]:
@@ -69,9 +79,11 @@ def compared_codes(response: CameraResponse) -> tuple[int, int]:
 
 def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
                        response: CameraResponse, unmeasured: Sequence[int] = (),
-                       exclude: np.ndarray | None = None) -> np.ndarray:
+                       exclude: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Relative exposures ``(P,)`` of ``codes`` ``(P, H, W, C)`` (shortest first) from
-    the data, in the units of ``exposures`` (the metadata's, which anchor the set).
+    the data, in the units of ``exposures`` (the metadata's, which anchor the set), and
+    the data's exposure steps over the metadata's (:func:`exposure_slope`, NaN with
+    fewer than three brackets measured).
 
     Parameters
     ----------
@@ -93,12 +105,12 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
     log_t, _ = fit_log_exposures(codes, response, prior=meta, unmeasured=unmeasured,
                                  exclude=exclude)
     if not len(unmeasured):
-        return np.exp(anchor_Theil_Sen(log_t, meta))
+        return np.exp(anchor_Theil_Sen(log_t, meta)), exposure_slope(log_t, meta)
     measured = np.ones(meta.size, bool)
     measured[list(unmeasured)] = False
     found = meta.copy()
     found[measured] = anchor_Theil_Sen(log_t[measured], meta[measured])
-    return np.exp(found)
+    return np.exp(found), exposure_slope(log_t[measured], meta[measured])
 
 
 def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
@@ -157,22 +169,30 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
     return log_t, [int(c) for c in np.flatnonzero(~linked)]
 
 
+def exposure_slope(log_t: np.ndarray, meta: np.ndarray) -> float:
+    """The Theil-Sen slope of ``log_t`` (the data's log exposures) against ``meta`` (the
+    metadata's): the median of the pairwise slopes, the data's stops per metadata stop.
+    NaN for fewer than three brackets (two give one slope, which cannot tell a wrong
+    exposure from a wrong response)."""
+    if log_t.size < 3:
+        return math.nan
+    j, k = np.triu_indices(log_t.size, 1)
+    spread = meta[k] - meta[j]
+    ok = np.abs(spread) > 1e-9
+    return float(np.median((log_t[k] - log_t[j])[ok] / spread[ok]))
+
+
 def anchor_Theil_Sen(log_t: np.ndarray, meta: np.ndarray) -> np.ndarray:
     """``log_t`` mapped onto the metadata's scale: ``(log_t - c) / s`` for the
-    Theil-Sen line ``log_t = s meta + c`` (the median of the pairwise slopes, then of
-    the offsets), so one wrong bracket moves neither. A set of brackets and its response
-    are only known up to such a line (``g -> s g + c``, ``ln t -> s ln t + c``: the
-    exponent ambiguity of self-calibration); the metadata's spacing fixes it. Two
-    brackets give no slope: only the offset is fitted."""
-    count = log_t.size
-    slope = 1.0
-    if count > 2:
-        j, k = np.triu_indices(count, 1)
-        spread = meta[k] - meta[j]
-        ok = np.abs(spread) > 1e-9
-        slope = float(np.median((log_t[k] - log_t[j])[ok] / spread[ok]))
-        if not slope > 0:  # the data contradict the order: trust only the offset
-            slope = 1.0
+    Theil-Sen line ``log_t = s meta + c`` (the median of the pairwise slopes,
+    :func:`exposure_slope`, then of the offsets), so one wrong bracket moves neither. A
+    set of brackets and its response are only known up to such a line (``g -> s g +
+    c``, ``ln t -> s ln t + c``: the exponent ambiguity of self-calibration); the
+    metadata's spacing fixes it. Two brackets give no slope: only the offset is
+    fitted."""
+    slope = exposure_slope(log_t, meta)
+    if not slope > 0:  # the data contradict the order (or no slope): trust only the offset
+        slope = 1.0
     offset = float(np.median(log_t - slope * meta))
     return (log_t - offset) / slope
 
@@ -207,6 +227,14 @@ class ExposureCheck:
         Provisional exposures (``inferred`` ``"provisional"``) to register brackets with:
         the error their inference before registration raised, which stands unless the
         registered brackets give them (:func:`hdrio.job.stages.registered_exposures`).
+    slope
+        The data's exposure steps over the metadata's, before the estimates were
+        anchored to it (:func:`exposure_slope`; NaN where not measured).
+    response
+        The response the brackets were linearised with, in words, where it was not
+        solved from them (``--response linear``, ``--response-from``): a solved one fits
+        the metadata's steps by construction, one given may not fit the brackets at all
+        (:data:`SLOPE_BOUND`). Empty for a solved response.
     """
 
     files: tuple[str, ...]
@@ -218,6 +246,8 @@ class ExposureCheck:
     exif: np.ndarray | None = None
     unmeasured: tuple[int, ...] = ()
     deferred: InputError | None = None
+    slope: float = math.nan
+    response: str = ""
 
     @property
     def stops(self) -> np.ndarray:
@@ -267,7 +297,24 @@ class ExposureCheck:
                     f"say {_text(data)} ({stops:+.2f} stop); "
                     + ("used the data's (--exposures-from-data)" if self.used
                        else "--exposures-from-data uses the data's"))
-        return lines
+        misfit = self.response_misfit()
+        return lines if misfit is None else [misfit, *lines]
+
+    def response_misfit(self) -> str | None:
+        """One line when the brackets do not fit a :attr:`response` that was not solved
+        from them: through it, their exposure steps measure more than
+        :data:`SLOPE_BOUND` times the metadata's, or less than its inverse (a wrong
+        exposure moves one bracket, a response that does not fit moves every step
+        alike); else ``None``."""
+        if not self.response or not math.isfinite(self.slope) or \
+                1 / SLOPE_BOUND <= self.slope <= SLOPE_BOUND:
+            return None
+        hint = (" (display-encoded codes, as an sRGB JPEG's are?)"
+                if self.slope < 1 and self.response.startswith("the linear") else "")
+        return (f"the brackets do not fit {self.response}: through it their exposure "
+                f"steps measure {self.slope:.2f}x the metadata's, where brackets that fit "
+                f"it measure 1{hint}; merged anyway: leave the option out to solve their "
+                "own curve, or check the exposures")
 
     def attributes(self) -> dict[str, object]:
         """``hdrio:exposuresMetadata``, ``hdrio:exposuresEstimated`` (decimal text, like
@@ -286,7 +333,9 @@ class ExposureCheck:
         return {"hdrio:exposuresMetadata": [f"{t:.9g}" for t in self.metadata],
                 "hdrio:exposuresEstimated": [f"{t:.9g}" for t in self.estimated],
                 "hdrio:exposuresFromData": int(self.used),
-                **(unmeasured if self.unmeasured else {})}
+                **(unmeasured if self.unmeasured else {}),
+                **({"hdrio:exposuresSlope": round(self.slope, 4)}
+                   if math.isfinite(self.slope) else {})}
 
     @property
     def units(self) -> str:
@@ -344,19 +393,22 @@ def exposures_from_data(stack: ExposureStack, response: CameraResponse, use: boo
     a bracket no longer than the one before it.
     """
     metadata = np.asarray(stack.exposures, np.float64)
-    estimated = estimate_exposures(stack.codes, metadata, response, unmeasured, exclude)
+    estimated, slope = estimate_exposures(stack.codes, metadata, response, unmeasured,
+                                          exclude)
     if use:
         for _ in range(iterations if solve is not None else 0):
             stack = replace(stack, exposures=in_order(stack.files, estimated))
             response = solve(stack)
-            again = estimate_exposures(stack.codes, metadata, response, unmeasured, exclude)
+            again, slope = estimate_exposures(stack.codes, metadata, response, unmeasured,
+                                              exclude)
             moved = float(np.max(np.abs(np.log2(again / estimated))))
             estimated = again
             if moved < tolerance_stops:
                 break
         stack = replace(stack, exposures=in_order(stack.files, estimated))
     return stack, response, ExposureCheck(tuple(stack.files), metadata, estimated, use,
-                                          unmeasured=tuple(int(j) for j in unmeasured))
+                                          unmeasured=tuple(int(j) for j in unmeasured),
+                                          slope=slope)
 
 
 def in_order(files: Sequence[str], estimated: np.ndarray) -> np.ndarray:

@@ -48,6 +48,21 @@ def _merge_node(context, tree_name: str, node_name: str) -> HdrioMergeNode | Non
     return node if isinstance(node, HdrioMergeNode) else None
 
 
+# hdrio's words for the merge options, and this operator's (its file browser's side panel).
+_OPTION_WORDS = (("given by --exposures", "typed in Exposures"),
+                 ("--exposures-from-data", "Exposures From Data"))
+
+
+def exposure_warnings(result) -> list[str]:
+    """What ``hdrio merge`` warns of a merge's exposures (a bracket whose metadata the data
+    contradict), in this operator's words."""
+    check = result.exposures
+    lines = [] if check is None else check.warnings(result.stack.exposure_sources[0])
+    for cli, panel in _OPTION_WORDS:
+        lines = [line.replace(cli, panel) for line in lines]
+    return lines
+
+
 class HDRIO_OT_solve_response(bpy.types.Operator):
     """Solve the camera response (Debevec 1997) from the node's bracket images and bake it
     into the node's curves"""
@@ -159,9 +174,9 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
             return {"CANCELLED"}
         exposures = self.exposures.replace(",", " ").split() or None
         try:
-            merge_files(paths, output, exposures=exposures,
-                        options=MergeOptions(highlights=self.highlights,
-                                             exposures_from_data=self.exposures_from_data))
+            result = merge_files(paths, output, exposures=exposures,
+                                 options=MergeOptions(highlights=self.highlights,
+                                                      exposures_from_data=self.exposures_from_data))
         except InputError as error:
             if "no exposure time" in error.problem:  # hdrio's words name a CLI option
                 self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "
@@ -174,6 +189,8 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         except HdrioError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
+        for line in exposure_warnings(result):
+            self.report({"WARNING"}, line)
         image = bpy.data.images.load(str(output), check_existing=False)
         tree = active_compositor_tree(context) or compositor_tree(context.scene)
         node = tree.nodes.new("CompositorNodeImage")

@@ -308,6 +308,30 @@ def test_merge_to_exr_exposures_from_data_is_hdrio_merges(write_brackets, tmp_pa
     assert attributes["hdrio:exposuresInferred"] == cli_attributes["hdrio:exposuresInferred"]
 
 
+def test_merge_to_exr_warns_of_an_exposure_the_data_contradict(write_brackets, tmp_path,
+                                                               capsys):
+    # `hdrio merge` names a bracket whose exposure the data contradict (here b.png, shot
+    # at 1 s, typed as 2); the operator reports the same line as a warning, in the words
+    # of its panel, and merges as the command does.
+    from hdrio.job.run import merge_paths
+    from plugins.blender.operators import exposure_warnings
+
+    paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
+    assert hdrio_main(["merge", *map(str, paths), "--exposures", "1/4,2,4", "-o",
+                       str(tmp_path / "cli.exr"), "-q"]) == 0
+    said = capsys.readouterr().err
+    assert "b.png: exposure 2 given by --exposures, the data say 1.001 (-1.00 stop); " \
+        "--exposures-from-data uses the data's" in said, said
+    (line,) = exposure_warnings(merge_paths(paths, exposures=["1/4", "2", "4"]))
+    assert line == ("b.png: exposure 2 typed in Exposures, the data say 1.001 (-1.00 "
+                    "stop); Exposures From Data uses the data's")
+    assert bpy.ops.hdrio.merge_to_exr(
+        directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+        output=str(tmp_path / "blender.exr"), exposures="1/4 2 4") == {"FINISHED"}
+    assert np.array_equal(read_exr(tmp_path / "blender.exr")[0],
+                          read_exr(tmp_path / "cli.exr")[0])
+
+
 def test_tonemap_local_operator_matches_hdrio(tmp_path):
     radiance = demo_scene(48, 64)
     source = write_exr(tmp_path / "scene.exr", radiance, pixel_type="float")
