@@ -569,3 +569,52 @@ def test_every_real_stack_is_checked_against_the_linear_response(shared_data):
         if name != "night":
             solved, misfit = _response_misfit(stack, **option_fields)
             assert misfit is None and abs(solved.slope - 1) < 0.02, (name, solved.slope)
+
+
+def test_exposures_that_belong_to_other_files_are_refused(shared_data, tmp_path, capsys):
+    """frobisher's times typed in the reverse order: the merge was garbage (a flat
+    response, every pixel clipped in every bracket) and its one warning named a single
+    bracket. Now the bracket said to be longer, whose codes are lower, is named, with
+    both exposures and where they came from; nothing is written. Two brackets, and a
+    sidecar with two lines swapped, the same."""
+    folder = shared_data("frobisher_001")
+    files = sorted(folder.glob("IMG_*.jpg"))
+    code, _, err = run(capsys, "merge", *files, "--exposures", "8,1,1/8", "-o",
+                       tmp_path / "x.exr")
+    assert code == 2 and "IMG_2601.jpg: exposure 1 given by --exposures, 3.00 stops " \
+        "longer than IMG_2602.jpg's 1/8, yet its codes are lower at " in err, err
+    assert "these exposures belong to other files" in err and not (tmp_path / "x.exr").exists()
+    code, _, err = run(capsys, "merge", files[0], files[2], "--exposures", "8,1/8", "-o",
+                       tmp_path / "x.exr")
+    assert code == 2 and "IMG_2600.jpg: exposure 8 given by --exposures, 6.00 stops " \
+        "longer than IMG_2602.jpg's 1/8" in err, err
+    sidecar = tmp_path / "exposures.csv"
+    sidecar.write_text("file,exposure_time_s\nIMG_2600.jpg,1\nIMG_2601.jpg,0.125\n"
+                       "IMG_2602.jpg,8\n")
+    code, _, err = run(capsys, "merge", *files, "--exposures-from", sidecar, "-o",
+                       tmp_path / "x.exr")
+    assert code == 2 and "IMG_2600.jpg: exposure 1 in the exposure list (--exposures-from), " \
+        "3.00 stops longer than IMG_2601.jpg's 1/8" in err, err
+    code, _, err = run(capsys, "merge", *files, "-o", tmp_path / "x.exr", "-q")
+    assert code == 0, err
+
+
+def test_brackets_a_third_of_a_stop_apart_are_not_checked_for_order():
+    """Two brackets whose metadata differ by less than ORDER_CHECK_STOPS may swap places
+    (an ND filter's tolerance, a camera's third-stop rounding): only farther ones are
+    held to their brightness."""
+    from hdrio.errors import InputError
+    from hdrio.merge.ladder import ORDER_CHECK_STOPS, check_exposure_order
+
+    assert 1 / 3 < ORDER_CHECK_STOPS < 1
+    radiance = np.linspace(0.02, 0.6, 64 * 48 * 3).reshape(48, 64, 3)
+    codes = render_brackets(radiance, [1.0, 2 ** (1 / 3), 4.0], seed=1)
+    files = ["a.png", "b.png", "c.png"]
+    swapped = ExposureStack.from_arrays(codes[[1, 0, 2]], [1.0, 2 ** (1 / 3), 4.0],
+                                        files=files)
+    check_exposure_order(swapped)  # a third of a stop: not held
+    reversed_ends = ExposureStack.from_arrays(codes[[2, 1, 0]], [1.0, 2 ** (1 / 3), 4.0],
+                                              files=files)
+    with pytest.raises(InputError, match="c.png: exposure 4 given by --exposures, 2.00 stops "
+                                         "longer than a.png's 1"):
+        check_exposure_order(reversed_ends)

@@ -27,6 +27,7 @@ from hdrio.job.result import Progress
 from hdrio.merge.exclusion import colour_exclusion, either
 from hdrio.merge.exposure_check import ExposureCheck, exposures_from_data
 from hdrio.merge.ladder import (
+    check_exposure_order,
     in_brightness_order,
     infer_exposures,
     needs_inference,
@@ -116,6 +117,8 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
     inferring = needs_inference(stack)
     if inferring:  # no exposure metadata: order by brightness, before masks
         stack = in_brightness_order(stack)
+    else:  # exposures that belong to other files stop here, not in a flat response
+        check_exposure_order(stack)
     if options.exposures_from_data and (stack.count < 3 or filtered is not None):
         raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
                          f"(the filters are measured on their own); got {stack.count} "

@@ -284,7 +284,7 @@ class ExposureCheck:
         """One line per bracket off by more than :data:`WARN_STOPS`, naming its file and
         where its exposure came from (``source``: the stack's exposure source, ``exif``,
         ``sidecar``...); none when there was no metadata to be off."""
-        said = _SAID_IN.get(source, "in the metadata")
+        said = said_in(source)
         lines: list[str] = []
         if self.inferred and self.exif is None:
             return lines
@@ -293,8 +293,8 @@ class ExposureCheck:
             stops = math.log2(data / meta) if math.isfinite(meta) else 0.0
             if abs(stops) > WARN_STOPS:
                 lines.append(
-                    f"{Path(name).name}: exposure {_text(meta)} {said}, the data "
-                    f"say {_text(data)} ({stops:+.2f} stop); "
+                    f"{Path(name).name}: exposure {exposure_text(meta)} {said}, the data "
+                    f"say {exposure_text(data)} ({stops:+.2f} stop); "
                     + ("used the data's (--exposures-from-data)" if self.used
                        else "--exposures-from-data uses the data's"))
         misfit = self.response_misfit()
@@ -355,8 +355,8 @@ class ExposureCheck:
         if self.exif is not None:
             return (f"inferred from the pixels for {len(self.files) - len(self.exif_files)} "
                     f"of {len(self.files)} brackets (EXIF on {', '.join(self.exif_files)}), "
-                    f"{self.inferred}; {_text(self.estimated[0])} .. "
-                    f"{_text(self.estimated[-1])} s")
+                    f"{self.inferred}; {exposure_text(self.estimated[0])} .. "
+                    f"{exposure_text(self.estimated[-1])} s")
         stops = np.log2(self.estimated)
         return (f"inferred from the pixels (no metadata), {self.inferred}; relative, "
                 f"{Path(self.reference).name} = 1, {stops[0]:+.2f} .. {stops[-1]:+.2f} stops")
@@ -373,7 +373,14 @@ _SAID_IN = {"exif": "in the EXIF", "sidecar": "in the exposure list (--exposures
             "filename": "in the file name", "explicit": "given by --exposures"}
 
 
-def _text(t: float) -> str:
+def said_in(source: str) -> str:
+    """Where exposures of ``source`` (an exposure source of
+    :class:`~hdrio.stack.ExposureStack`) were read, in the words of a warning."""
+    return _SAID_IN.get(source, "in the metadata")
+
+
+def exposure_text(t: float) -> str:
+    """An exposure as a camera shows it: ``1/125``, ``8``."""
     return f"1/{1 / t:.4g}" if t < 1 else f"{t:.4g}"
 
 
@@ -418,8 +425,9 @@ def in_order(files: Sequence[str], estimated: np.ndarray) -> np.ndarray:
     j = first_too_close(estimated)
     if j is not None:
         raise InputError(files[j + 1], (
-            f"--exposures-from-data: the data say its exposure is {_text(estimated[j + 1])}, "
-            f"not longer than {Path(files[j]).name}'s {_text(estimated[j])}: the brackets "
+            "--exposures-from-data: the data say its exposure is "
+            f"{exposure_text(estimated[j + 1])}, not longer than {Path(files[j]).name}'s "
+            f"{exposure_text(estimated[j])}: the brackets "
             "do not agree on the scene (something moved, or they could not be "
             "registered), so their exposures cannot come from the data: give them "
             "(--exposures), or merge with the metadata's (no --exposures-from-data)"))
