@@ -618,3 +618,16 @@ def test_brackets_a_third_of_a_stop_apart_are_not_checked_for_order():
     with pytest.raises(InputError, match="c.png: exposure 4 given by --exposures, 2.00 stops "
                                          "longer than a.png's 1"):
         check_exposure_order(reversed_ends)
+
+
+def test_an_nd_filter_given_to_an_unfiltered_bracket_is_refused(shared_data, tmp_path,
+                                                                capsys):
+    """ghost/ has no filtered bracket: --nd 3 on its shortest (named by its stem, in
+    lower case) folds 3 stops into an exposure the pixels contradict; the error says the
+    filter's stops were counted and points at --nd."""
+    folder = shared_data("hdrtoolbox_stacks")
+    files = sorted((folder / "ghost").glob("*.JPG"))
+    code, _, err = run(capsys, "merge", *files, "--exposures-from", folder / "exposures.csv",
+                       "--nd", "3:img_0961", "-o", tmp_path / "x.exr")
+    assert code == 2 and "IMG_0961.JPG's 1/48 (--nd's 3 stops counted), yet its codes are " \
+        "lower at" in err and err.rstrip().endswith("check them, and --nd's filters"), err

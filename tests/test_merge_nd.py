@@ -51,6 +51,14 @@ def test_nd_option_values():
                                   [10, 0])
     with pytest.raises(ValueError, match="--nd 10:moon_\\*: matches none of the brackets"):
         nd_stops(["sun_1.jpg"], [parse_nd("10:moon_*")])
+    # A camera's names: the stem names a file too, in any case (the stem alone matched
+    # none of them).
+    files = ["in/IMG_0959.JPG", "in/IMG_0960.JPG", "in/IMG_0961.JPG"]
+    for pattern in ("IMG_0961", "img_0961.jpg", "IMG_096[1]", "*61", "in/img_0961.JPG"):
+        np.testing.assert_array_equal(nd_stops(files, [parse_nd(f"10:{pattern}")]),
+                                      [0, 0, 10], err_msg=pattern)
+    with pytest.raises(ValueError, match="matches none"):
+        nd_stops(files, [parse_nd("10:IMG_096")])
 
 
 def test_sun_through_a_10_stop_filter(sun):

@@ -149,7 +149,8 @@ MERGE_OPTIONS: tuple[Option, ...] = (
            help="the brackets whose name matches PATTERN (all without one) were shot "
                 "through a neutral-density filter of STOPS stops (ND 3.0 = ND1000 = 10); "
                 "its true level and colour cast are measured where they overlap the "
-                "unfiltered brackets, and corrected (repeatable; PATTERN e.g. 'sun_*.jpg')"),
+                "unfiltered brackets, and corrected (repeatable; PATTERN: a file name or "
+                "its stem, shell wildcards, any case, e.g. 'sun_*.jpg' or IMG_0961)"),
     Option("--response", ("METHOD",), "response", registry(response_methods),
            example=("linear",),
            help="camera response: Debevec1997 (solved; the default), Robertson2003 "

@@ -118,7 +118,7 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
     if inferring:  # no exposure metadata: order by brightness, before masks
         stack = in_brightness_order(stack)
     else:  # exposures that belong to other files stop here, not in a flat response
-        check_exposure_order(stack)
+        check_exposure_order(stack, filtered)
     if options.exposures_from_data and (stack.count < 3 or filtered is not None):
         raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
                          f"(the filters are measured on their own); got {stack.count} "

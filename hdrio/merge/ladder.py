@@ -178,15 +178,23 @@ ORDER_CHECK_PIXELS = 1 << 14
 are lower at 87 and 96 of the 111 percentiles either way."""
 
 
-def check_exposure_order(stack: ExposureStack) -> None:
+def check_exposure_order(stack: ExposureStack, filtered: np.ndarray | None = None) -> None:
     """Raise :class:`InputError` naming a bracket whose exposure the metadata put more
     than :data:`ORDER_CHECK_STOPS` above another's while its codes are lower, as
     :func:`brightness_order` orders brackets (at most percentiles, by more than a code).
     Every code grows with exposure: exposures that say otherwise belong to other files
     (a list typed in another order than the files', a sidecar's lines swapped), and a
     merge with them was garbage (frobisher with its times reversed: a flat response, 100
-    % of the pixels clipped in every bracket, and a warning that named one bracket)."""
+    % of the pixels clipped in every bracket, and a warning that named one bracket).
+    ``filtered``: the stops of ``--nd`` filter folded into each bracket's exposure, which
+    the message then says."""
     exposures = np.asarray(stack.exposures, np.float64)
+
+    def text(j: int) -> str:
+        stops = 0.0 if filtered is None else float(filtered[j])
+        return exposure_text(exposures[j]) + (f" (--nd's {stops:g} stops counted)"
+                                              if stops else "")
+
     if stack.count < 2:
         return
     levels = _brightness_levels(stack, ORDER_CHECK_PIXELS)
@@ -199,13 +207,14 @@ def check_exposure_order(stack: ExposureStack) -> None:
             if _ordered(up, down):
                 said = said_in(stack.exposure_sources[longer])
                 raise InputError(stack.files[longer], (
-                    f"exposure {exposure_text(exposures[longer])} {said}, {stops:.2f} "
-                    f"stops longer than {Path(stack.files[shorter]).name}'s "
-                    f"{exposure_text(exposures[shorter])}, yet its codes are lower at "
-                    f"{up} of {levels.shape[1]} percentiles: these exposures belong to "
-                    "other files (given in another order?); check them, or leave them "
-                    "out where the files' EXIF has them (a bracket shot through a "
-                    "neutral-density filter: --nd)"))
+                    f"exposure {text(longer)} {said}, {stops:.2f} stops longer than "
+                    f"{Path(stack.files[shorter]).name}'s {text(shorter)}, yet its codes "
+                    f"are lower at {up} of {levels.shape[1]} percentiles: these exposures "
+                    "belong to other files (given in another order?); "
+                    + ("check them, and --nd's filters" if filtered is not None
+                       and np.any(filtered) else
+                       "check them, or leave them out where the files' EXIF has them (a "
+                       "bracket shot through a neutral-density filter: --nd)")))
 
 
 def in_brightness_order(stack: ExposureStack) -> ExposureStack:

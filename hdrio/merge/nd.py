@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from fnmatch import fnmatch
+from fnmatch import fnmatchcase
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +36,14 @@ class NDFilter:
     pattern: str | None = None
 
     def matches(self, file: str) -> bool:
-        return self.pattern is None or fnmatch(Path(file).name, self.pattern) \
-            or fnmatch(str(file), self.pattern)
+        """Whether ``file`` is one of the filtered brackets: ``pattern`` (shell wildcards,
+        any case, as camera files are often named ``IMG_0961.JPG``) matches its name, its
+        name without the suffix (``IMG_0961``) or its path as given."""
+        if self.pattern is None:
+            return True
+        pattern, path = self.pattern.lower(), Path(file)
+        return any(fnmatchcase(text.lower(), pattern)
+                   for text in (path.name, path.stem, str(file)))
 
 
 def parse_nd(text: str) -> NDFilter:
