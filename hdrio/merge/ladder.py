@@ -198,6 +198,10 @@ def check_exposure_order(stack: ExposureStack, filtered: np.ndarray | None = Non
     if stack.count < 2:
         return
     levels = _brightness_levels(stack, ORDER_CHECK_PIXELS)
+    backwards = np.array_equal(np.argsort(levels.mean(axis=1), kind="stable"),
+                               np.arange(stack.count)[::-1])
+    why = ("they run the other way: 1/t given for t, e.g. 125 for 1/125 s?" if backwards
+           else "given in another order?")
     for longer in range(1, stack.count):
         for shorter in range(longer):
             stops = math.log2(exposures[longer] / exposures[shorter])
@@ -210,7 +214,7 @@ def check_exposure_order(stack: ExposureStack, filtered: np.ndarray | None = Non
                     f"exposure {text(longer)} {said}, {stops:.2f} stops longer than "
                     f"{Path(stack.files[shorter]).name}'s {text(shorter)}, yet its codes "
                     f"are lower at {up} of {levels.shape[1]} percentiles: these exposures "
-                    "belong to other files (given in another order?); "
+                    f"belong to other files ({why}); "
                     + ("check them, and --nd's filters" if filtered is not None
                        and np.any(filtered) else
                        "check them, or leave them out where the files' EXIF has them (a "
