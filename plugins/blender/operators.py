@@ -53,14 +53,19 @@ _OPTION_WORDS = (("given by --exposures", "typed in Exposures"),
                  ("--exposures-from-data", "Exposures From Data"))
 
 
+def in_panel_words(text: str) -> str:
+    """``text`` (hdrio's message) with the merge options in Merge Brackets to EXR's words."""
+    for cli, panel in _OPTION_WORDS:
+        text = text.replace(cli, panel)
+    return text
+
+
 def exposure_warnings(result) -> list[str]:
     """What ``hdrio merge`` warns of a merge's exposures (a bracket whose metadata the data
     contradict), in this operator's words."""
     check = result.exposures
     lines = [] if check is None else check.warnings(result.stack.exposure_sources[0])
-    for cli, panel in _OPTION_WORDS:
-        lines = [line.replace(cli, panel) for line in lines]
-    return lines
+    return [in_panel_words(line) for line in lines]
 
 
 class HDRIO_OT_solve_response(bpy.types.Operator):
@@ -108,8 +113,9 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
                 rebuilt = merge_stack(stack, replace(options, highlights="reconstruct"),
                                       response=result.response)
                 gain = highlight_gain(result.radiance, rebuilt.radiance)
-        except HdrioError as error:
-            self.report({"ERROR"}, str(error))
+        except HdrioError as error:  # the exposures are the node's fields
+            self.report({"ERROR"}, str(error).replace("given by --exposures",
+                                                      "in the node's Bracket fields"))
             return {"CANCELLED"}
         node.set_response(response_to_json(
             result.response, f"{result.response.method} from {len(paths)} brackets",
@@ -184,7 +190,7 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
                                        "file browser's side panel (e.g. 1/8 1 8), or tick "
                                        "Exposures From Data")
             else:
-                self.report({"ERROR"}, str(error))
+                self.report({"ERROR"}, in_panel_words(str(error)))
             return {"CANCELLED"}
         except HdrioError as error:
             self.report({"ERROR"}, str(error))

@@ -185,6 +185,11 @@ def test_solve_refuses_placeholder_exposures_in_one_line(write_brackets):
     assert node.placeholder_brackets() == []
     assert bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name) == {
         "FINISHED"}
+    # Typed the other way round: refused before the solve, in the node's words.
+    node.exposures[0], node.exposures[2] = 4.0, 0.25
+    with pytest.raises(RuntimeError, match="b.png: exposure 1 in the node's Bracket fields, "
+                                           "2.00 stops longer than c.png's 1/4"):
+        bpy.ops.hdrio.solve_response(tree_name=tree.name, node_name=node.name)
 
 
 def test_saved_file_reopened_twice_renders_the_same_pixels(write_brackets, tmp_path):
@@ -330,6 +335,15 @@ def test_merge_to_exr_warns_of_an_exposure_the_data_contradict(write_brackets, t
         output=str(tmp_path / "blender.exr"), exposures="1/4 2 4") == {"FINISHED"}
     assert np.array_equal(read_exr(tmp_path / "blender.exr")[0],
                           read_exr(tmp_path / "cli.exr")[0])
+    # Exposures typed in another order than the files': refused, in the same words.
+    with pytest.raises(RuntimeError, match="b.png: exposure 1 typed in Exposures, 2.00 "
+                                           "stops longer than c.png's 1/4, yet its codes "
+                                           "are lower") as refused:
+        bpy.ops.hdrio.merge_to_exr(
+            directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+            output=str(tmp_path / "reversed.exr"), exposures="4 1 1/4")
+    assert "--exposures" not in str(refused.value)
+    assert not (tmp_path / "reversed.exr").exists()
 
 
 def test_tonemap_local_operator_matches_hdrio(tmp_path):
