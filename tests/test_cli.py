@@ -99,6 +99,35 @@ def test_merge_with_explicit_exposures_and_float_output(brackets, out_dir, capsy
     assert OpenEXR.File(str(out_dir / "f.exr")).channels()["RGB"].pixels.dtype == np.float32
 
 
+def test_merge_compression_is_the_chains(brackets, out_dir, capsys):
+    """``hdrio merge --compression`` takes the chain's names (any case, ``dwaa:LEVEL``),
+    writes them and says them in the summary; a name OpenEXR does not have is refused
+    before any bracket is read, listing the choices (the command had no such option:
+    'did you mean --response?'). Pixels are the zip file's where the compression is
+    lossless."""
+    code, out, err = run(capsys, "merge", *brackets, "-o", out_dir / "piz.exr",
+                         "--compression", "PIZ")
+    assert code == 0 and f"wrote:     {out_dir / 'piz.exr'} (half, piz) in" in out, err
+    code, out, err = run(capsys, "merge", *brackets, "-o", out_dir / "zip.exr")
+    assert code == 0 and "(half, zip) in" in out, err
+    code, out, err = run(capsys, "merge", *brackets, "-o", out_dir / "dwaa.exr", "-d",
+                         "float", "--compression", "dwaa:45")
+    assert code == 0 and "(float, dwaa:45) in" in out, err
+    images = {name: oiio.ImageInput.open(str(out_dir / f"{name}.exr"))
+              for name in ("piz", "zip", "dwaa")}
+    specs = {name: image.spec() for name, image in images.items()}
+    assert specs["piz"].getattribute("compression") == "piz"
+    assert specs["dwaa"].getattribute("compression") == "dwaa"
+    assert specs["dwaa"].getattribute("openexr:dwaCompressionLevel") == 45
+    assert np.array_equal(images["piz"].read_image(), images["zip"].read_image())
+    for image in images.values():
+        image.close()
+    code, _, err = run(capsys, "merge", *brackets, "-o", out_dir / "lzw.exr",
+                       "--compression", "lzw")
+    assert code == 2 and "--compression 'lzw': choose from none, rle, zips, zip, piz" in err
+    assert not (out_dir / "lzw.exr").exists()
+
+
 def test_info_on_several_files(brackets, capsys):
     code, out, err = run(capsys, "info", *brackets[:2])
     assert code == 0, err

@@ -11,8 +11,8 @@ import numpy as np
 from hdrio.cli.chain_registry import Chain, ChainError, Image, one_argument, operation
 from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, check_output, make_parent
 from hdrio.cli.values import positive_whole
+from hdrio.io.write import EXR_COMPRESSIONS, exr_compression
 
-_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
 _one = one_argument
 # The fields a set's output name may use (hdrio.grouping.BracketSet.fields), with
 # stand-in values for checking a pattern before any set is known.
@@ -36,10 +36,7 @@ def _pixel_type(values: list[str]) -> str:
 
 
 def _compression_name(values: list[str]) -> str:
-    name, _, level = values[0].lower().partition(":")
-    if name not in _COMPRESSIONS or (level and not level.isdigit()):
-        raise ValueError(f"{values[0]!r}: choose from {', '.join(_COMPRESSIONS)}")
-    return values[0].lower()
+    return exr_compression(values[0])
 
 
 @operation("-d", "TYPE", convert=_pixel_type,
@@ -50,8 +47,8 @@ def _data_type(chain: Chain, value: str) -> None:
 
 
 @operation("--compression", "NAME", convert=_compression_name,
-           help=f"compression of the following EXR outputs: {', '.join(_COMPRESSIONS)} "
-                "(default zip; dwaa:45 sets a level)",
+           help="compression of the following EXR outputs: "
+                f"{', '.join(EXR_COMPRESSIONS)} (default zip; dwaa:45 sets a level)",
            example="a.jpg b.jpg c.jpg --merge --compression piz -o piz.exr")
 def _compression(chain: Chain, value: str) -> None:
     chain.settings["compression"] = value

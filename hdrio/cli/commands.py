@@ -20,6 +20,7 @@ from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
 from hdrio.io.orientation import turned_text
+from hdrio.io.write import EXR_COMPRESSIONS, exr_compression
 from hdrio.job.options import MergeOptions
 from hdrio.job.output import saturation_rule
 from hdrio.job.result import MergeResult
@@ -41,6 +42,9 @@ def add_merge(sub) -> None:
                         help="output OpenEXR file (missing folders are made)")
     parser.add_argument("-d", "--data-type", choices=["half", "float"], default="half",
                         help="EXR pixel type (default %(default)s)")
+    parser.add_argument("--compression", metavar="NAME", default="zip",
+                        help=f"EXR compression: {', '.join(EXR_COMPRESSIONS)} (default zip; "
+                             "dwaa:45 sets a level), as the chain's --compression")
     parser.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     preview = parser.add_argument_group("preview")
     preview.add_argument("--preview", help="also write a tone-mapped preview (jpg, png, tif)")
@@ -83,6 +87,10 @@ def run_merge(args: argparse.Namespace) -> int:
     check_outputs([(path, allowed) for path, allowed in ((output, EXR_SUFFIXES),
                                                          (preview, PREVIEW_SUFFIXES))
                    if path is not None], args.images)
+    try:
+        compression = exr_compression(args.compression)
+    except ValueError as error:
+        raise HdrioError(f"--compression {error}") from None
     if len(args.tonemap) > 2:
         raise HdrioError(f"--tonemap {' '.join(args.tonemap)}: expected OPERATOR "
                          "[NAME=VALUE,...]")
@@ -106,15 +114,17 @@ def run_merge(args: argparse.Namespace) -> int:
         args.images, output, preview=preview, tonemap=tonemap,
         tonemap_parameters=parameters, exposures=settings.get("exposures"),
         exposures_from=settings.get("exposures_from"), options=options,
-        pixel_type=args.data_type, progress=progress.step, read_progress=progress.bar,
-        display_view=display_view, observe=check.add, compile_ahead=True,
+        pixel_type=args.data_type, compression=compression, progress=progress.step,
+        read_progress=progress.bar, display_view=display_view, observe=check.add,
+        compile_ahead=True,
     )
     source = result.stack.exposure_sources[0]
     for line in result.exposures.warnings(source) if result.exposures is not None else ():
         print(f"hdrio merge: warning: {line}", file=sys.stderr)
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
-    text = summary(result, output, preview, label, args.data_type, report)
+    text = summary(result, output, preview, label, f"{args.data_type}, {compression}",
+                   report)
     if args.quiet:
         print(written_lines(text))
         return 0
@@ -169,8 +179,9 @@ def _seconds(t: float) -> str:
 
 
 def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: str,
-            data_type: str, report: CheckReport) -> str:
-    """What the merge did, from its own statistics and ``report`` (the EXR's check)."""
+            layout: str, report: CheckReport) -> str:
+    """What the merge did, from its own statistics and ``report`` (the EXR's check);
+    ``layout``: the EXR's pixel type and compression, e.g. ``half, zip``."""
     stack, stats, times = result.stack, result.statistics, result.timings
     height, width, channels = stack.shape
     bits = 8 if stack.code_max == 255 else 16
@@ -210,7 +221,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         *[f"nd:        {line}" for line in (result.nd.lines() if result.nd else [])],
         *[f"skipped:   {line}" for line in result.skipped.lines(channels)],
         f"range:     {full:.1f} stops (0.1-99.9 percentile: {robust:.1f} stops)",
-        f"wrote:     {output} ({data_type}, zip) in {times['write']:.2f} s"
+        f"wrote:     {output} ({layout}) in {times['write']:.2f} s"
         + ("" if result.exposure_scale == 1.0 else
            f"; scaled by {result.exposure_scale:g} to fit half floats"),
     ]
@@ -318,7 +329,7 @@ def run_demo(args: argparse.Namespace) -> int:
     result = merge_files(files, output, preview=preview, progress=progress.step,
                          read_progress=progress.bar, options=options, observe=check.add,
                          compile_ahead=True)
-    text = summary(result, output, preview, "reinhard-global", "half",
+    text = summary(result, output, preview, "reinhard-global", "half, zip",
                    merge_report(check, result, output))
     print(written_lines(text) if args.quiet else text)
     mask = well_exposed(result.stack.codes, result.stack.code_max)

@@ -24,6 +24,9 @@ from hdrio.io.native import size_thread_pools
 from hdrio.parallel import read_ahead, row_bands, threads
 
 HALF_MAX = 65504.0
+EXR_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa",
+                    "dwab")
+"""OpenEXR's compressions, as ``--compression`` names them (``dwaa:45`` sets a level)."""
 HALF_MIN_POSITIVE = 2.0**-24  # smallest positive (subnormal) half
 _AGGREGATE_LENGTHS = (2, 3, 9, 16)
 
@@ -236,6 +239,15 @@ class _WithLayers:
         return np.concatenate([np.asarray(self.rgb[rows], np.float32)]
                               + [np.asarray(layer[rows], np.float32) for layer in self.layers],
                               axis=-1)
+
+
+def exr_compression(text: str) -> str:
+    """``text`` as an EXR compression (:data:`EXR_COMPRESSIONS`, any case, an optional
+    ``:LEVEL``), lower-cased; raises ``ValueError`` listing the choices."""
+    name, _, level = text.lower().partition(":")
+    if name not in EXR_COMPRESSIONS or (level and not level.isdigit()):
+        raise ValueError(f"{text!r}: choose from {', '.join(EXR_COMPRESSIONS)}")
+    return text.lower()
 
 
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,

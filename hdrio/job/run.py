@@ -204,7 +204,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
                 exposures: Sequence[float | str] | None = None,
                 exposures_from: str | Path | None = None,
                 options: MergeOptions = MergeOptions(), pixel_type: str = "half",
-                progress: Progress | None = None,
+                compression: str = "zip", progress: Progress | None = None,
                 read_progress: Callable[[int, int, str], None] | None = None,
                 display_view: tuple[str, str] | None = None,
                 observe: Callable[[np.ndarray], None] | None = None,
@@ -213,7 +213,8 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     """Read brackets, merge them, write the EXR (and a tone-mapped preview), atomically.
 
     ``display_view``: render the preview through that OCIO display and view instead of
-    the ``tonemap`` operator (with ``tonemap_parameters``). ``observe`` sees each band of
+    the ``tonemap`` operator (with ``tonemap_parameters``). ``compression``: the EXR's
+    (:func:`hdrio.io.write.exr_compression`'s names). ``observe`` sees each band of
     the EXR as stored (see :func:`hdrio.cms.checks.StreamingCheck`). ``compile_ahead``:
     on a first run, compile the merge's, alignment's and deghosting's and the preview's
     kernels in helper processes meanwhile (:func:`hdrio.jit.compile_ahead`; for a command
@@ -235,6 +236,7 @@ def merge_files(paths: Sequence[str | Path], output: str | Path, *,
     say(f"writing {output}")
     result.exposure_scale = write_radiance(output, output_pixels(result),
                                            exr_attributes(result), pixel_type=pixel_type,
+                                           compression=compression,
                                            alpha=merge_alpha(result), observe=observe,
                                            layers=merge_layers(result))
     clock.lap("write")
