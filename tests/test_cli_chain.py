@@ -217,6 +217,17 @@ def test_data_type_and_compression(brackets, out, capsys):
     spec.close()
 
 
+def test_a_lossy_compression_is_said_in_the_report(brackets, out, capsys):
+    # -v prints the check of the merge's EXR as it was written: before a lossy codec.
+    code, said, err = run(capsys, "-v", *brackets, "--merge", "--compression", "dwab", "-o",
+                          out / "dwab.exr")
+    assert code == 0 and "note:         counted before dwab's lossy compression; hdrio " \
+        "check dwab.exr reads the pixels it kept" in said, said + err
+    code, said, err = run(capsys, "-v", *brackets, "--merge", "--compression", "pxr24", "-o",
+                          out / "pxr24.exr")  # lossless for half
+    assert code == 0 and "check:" in said and "lossy compression" not in said, said + err
+
+
 def test_exr_input_goes_on_the_stack(brackets, out, capsys):
     exr = out / "a.exr"
     assert run(capsys, *brackets, "--merge", "-o", exr)[0] == 0

@@ -9,7 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.cli.chain_registry import Chain, ChainError, Image, one_argument, operation
-from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, check_output, make_parent
+from hdrio.cli.outputs import (
+    EXR_SUFFIXES,
+    PREVIEW_SUFFIXES,
+    check_output,
+    lossy_note,
+    make_parent,
+)
 from hdrio.cli.values import positive_whole
 from hdrio.io.write import EXR_COMPRESSIONS, exr_compression
 
@@ -131,7 +137,11 @@ def _output(chain: Chain, text: str) -> None:
     if report is not None and chain.settings.get("report"):
         from hdrio.cms.checks import format_report
 
-        chain.say(format_report(report.report(str(path))))
+        checked = report.report(str(path))
+        lossy = lossy_note(compression, data_type, path)
+        if lossy:
+            checked.notes.append(lossy)
+        chain.say(format_report(checked))
 
 
 def merge_report(image: Image):

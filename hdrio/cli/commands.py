@@ -15,7 +15,7 @@ from hdrio.cli.merge_arguments import (
     settings_from_namespace,
     tonemap_arguments,
 )
-from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, make_parent
+from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, lossy_note, make_parent
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
@@ -123,6 +123,9 @@ def run_merge(args: argparse.Namespace) -> int:
         print(f"hdrio merge: warning: {line}", file=sys.stderr)
     label = " / ".join(display_view) if display_view else tonemap
     report = merge_report(check, result, output)
+    lossy = lossy_note(compression, args.data_type, output)
+    if lossy:
+        report.notes.append(lossy)
     text = summary(result, output, preview, label, f"{args.data_type}, {compression}",
                    report)
     if args.quiet:

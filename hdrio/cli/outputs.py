@@ -26,3 +26,15 @@ def check_output(path: Path, allowed: Iterable[str], inputs: Iterable[str | Path
 
 make_parent = make_folder_for
 """Make ``path``'s folder (and those above it) if missing; returns ``path``."""
+
+
+def lossy_note(compression: str, pixel_type: str, path: Path) -> str | None:
+    """The check report's note on an EXR ``path`` written with a lossy ``compression``
+    (:func:`hdrio.io.write.lossy_compression`): the report counts the pixels as they were
+    converted, before the codec; ``None`` for a lossless one."""
+    from hdrio.io.write import lossy_compression
+
+    if not lossy_compression(compression, pixel_type):
+        return None
+    return (f"counted before {compression}'s lossy compression; hdrio check {path.name} "
+            "reads the pixels it kept")

@@ -241,6 +241,15 @@ class _WithLayers:
                               axis=-1)
 
 
+def lossy_compression(compression: str, pixel_type: str) -> bool:
+    """Whether OpenEXR's ``compression`` (:func:`exr_compression`'s name) changes the
+    pixel values of a ``pixel_type`` (``half``, ``float``) image: the DWA and B44
+    families always, PXR24 for float (it keeps 24 bits of 32; half passes whole)."""
+    name = compression.partition(":")[0]
+    return name in ("dwaa", "dwab", "b44", "b44a") or (name == "pxr24"
+                                                        and pixel_type == "float")
+
+
 def exr_compression(text: str) -> str:
     """``text`` as an EXR compression (:data:`EXR_COMPRESSIONS`, any case, an optional
     ``:LEVEL``), lower-cased; raises ``ValueError`` listing the choices."""
