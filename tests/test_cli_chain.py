@@ -226,6 +226,12 @@ def test_a_lossy_compression_is_said_in_the_report(brackets, out, capsys):
     code, said, err = run(capsys, "-v", *brackets, "--merge", "--compression", "pxr24", "-o",
                           out / "pxr24.exr")  # lossless for half
     assert code == 0 and "check:" in said and "lossy compression" not in said, said + err
+    from hdrio.io.write import lossy_compression
+
+    assert [lossy_compression(name, "half") for name in ("b44", "pxr24", "dwab:45")] \
+        == [True, False, True]
+    assert [lossy_compression(name, "float") for name in ("b44a", "pxr24", "dwaa")] \
+        == [False, True, True]
 
 
 def test_exr_input_goes_on_the_stack(brackets, out, capsys):

@@ -243,11 +243,13 @@ class _WithLayers:
 
 def lossy_compression(compression: str, pixel_type: str) -> bool:
     """Whether OpenEXR's ``compression`` (:func:`exr_compression`'s name) changes the
-    pixel values of a ``pixel_type`` (``half``, ``float``) image: the DWA and B44
-    families always, PXR24 for float (it keeps 24 bits of 32; half passes whole)."""
+    pixel values of a ``pixel_type`` (``half``, ``float``) image: DWAA and DWAB always
+    (a DCT of the colour channels); B44 and B44A for half (they pack half channels'
+    4 x 4 blocks, and leave float ones whole); PXR24 for float (it keeps 24 bits of 32,
+    and half whole)."""
     name = compression.partition(":")[0]
-    return name in ("dwaa", "dwab", "b44", "b44a") or (name == "pxr24"
-                                                        and pixel_type == "float")
+    return name in ("dwaa", "dwab") or (name in ("b44", "b44a") and pixel_type == "half") \
+        or (name == "pxr24" and pixel_type == "float")
 
 
 def exr_compression(text: str) -> str:
