@@ -17,6 +17,7 @@ from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
+from hdrio.io.write import EXR_COMPRESSIONS
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_files, merge_stack
 from hdrio.tonemap import TONEMAP_METHODS
@@ -155,6 +156,15 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         description="Pixels with channels clipped in every bracket, as `hdrio merge "
                     "--highlights`",
         items=HIGHLIGHT_ITEMS)
+    data_type: EnumProperty(  # type: ignore[valid-type]
+        name="Pixel Type", default="half",
+        description="EXR pixel type, as `hdrio merge -d`",
+        items=[("half", "Half", "16-bit float"), ("float", "Float", "32-bit float")])
+    compression: EnumProperty(  # type: ignore[valid-type]
+        name="Compression", default="zip",
+        description="EXR compression, as `hdrio merge --compression`",
+        items=[(name, name.upper(), f"`hdrio merge --compression {name}`")
+               for name in EXR_COMPRESSIONS])
     filter_image: bpy.props.BoolProperty(default=True, options={"HIDDEN"})  # type: ignore
 
     def invoke(self, context, event):
@@ -182,7 +192,8 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         try:
             result = merge_files(paths, output, exposures=exposures,
                                  options=MergeOptions(highlights=self.highlights,
-                                                      exposures_from_data=self.exposures_from_data))
+                                                      exposures_from_data=self.exposures_from_data),
+                                 pixel_type=self.data_type, compression=self.compression)
         except InputError as error:
             if "no exposure time" in error.problem:  # hdrio's words name a CLI option
                 self.report({"ERROR"}, f"{error.path}: no exposure time (no EXIF, no time "

@@ -279,6 +279,30 @@ def test_merge_to_exr_matches_hdrio_merge_command(shared_data, tmp_path):
         output=str(blender_output), overwrite=True) == {"FINISHED"}
 
 
+def test_merge_to_exr_pixel_type_and_compression_are_hdrio_merges(shared_data, tmp_path):
+    # Pixel Type and Compression are `hdrio merge -d` and `--compression`: the same file.
+    import OpenImageIO as oiio
+
+    folder = shared_data("frobisher_001")
+    names = sorted(p.name for p in folder.glob("*.jpg"))
+    paths = [str(folder / name) for name in names]
+    cli_output = tmp_path / "cli.exr"
+    assert hdrio_main(["merge", *paths, "-o", str(cli_output), "-q", "-d", "float",
+                       "--compression", "piz"]) == 0
+    blender_output = tmp_path / "blender.exr"
+    assert bpy.ops.hdrio.merge_to_exr(
+        directory=str(folder), files=[{"name": name} for name in names],
+        output=str(blender_output), data_type="float", compression="piz") == {"FINISHED"}
+    cli_pixels, cli_attributes = read_exr(cli_output)
+    pixels, attributes = read_exr(blender_output)
+    assert np.array_equal(pixels, cli_pixels)
+    assert attributes.pop("DateTime") and cli_attributes.pop("DateTime")
+    assert attributes == cli_attributes and attributes["compression"] == "piz"
+    image = oiio.ImageInput.open(str(blender_output))
+    assert str(image.spec().format) == "float"
+    image.close()
+
+
 def test_merge_to_exr_reports_bad_input_in_blender_words(write_brackets, tmp_path):
     # Names without exposures, and PNGs without EXIF: nothing gives the exposures.
     paths = write_brackets((1 / 4, 1.0, 4.0), names=["a.png", "b.png", "c.png"])
