@@ -49,16 +49,18 @@ def _merge_node(context, tree_name: str, node_name: str) -> HdrioMergeNode | Non
     return node if isinstance(node, HdrioMergeNode) else None
 
 
-# hdrio's words for the merge options, and this operator's (its file browser's side panel).
-_OPTION_WORDS = (("given by --exposures", "typed in Exposures"),
-                 ("--exposures-from-data", "Exposures From Data"))
+PANEL_EXPOSURES = "typed in Exposures"
+"""Where Merge Brackets to EXR's exposures come from, in its side panel's words."""
+NODE_EXPOSURES = "in the node's Bracket fields"
+"""Where the HDR Merge node's Solve takes its exposures from."""
 
 
-def in_panel_words(text: str) -> str:
-    """``text`` (hdrio's message) with the merge options in Merge Brackets to EXR's words."""
-    for cli, panel in _OPTION_WORDS:
-        text = text.replace(cli, panel)
-    return text
+def in_panel_words(text: str, exposures: str = PANEL_EXPOSURES) -> str:
+    """``text`` (hdrio's message) with the merge options in Blender's words: exposures
+    given by ``--exposures`` are ``exposures`` (the panel's or the node's), and
+    ``--exposures-from-data`` is the panel's Exposures From Data."""
+    return text.replace("given by --exposures", exposures).replace(
+        "--exposures-from-data", "Exposures From Data")
 
 
 def exposure_warnings(result) -> list[str]:
@@ -114,9 +116,8 @@ class HDRIO_OT_solve_response(bpy.types.Operator):
                 rebuilt = merge_stack(stack, replace(options, highlights="reconstruct"),
                                       response=result.response)
                 gain = highlight_gain(result.radiance, rebuilt.radiance)
-        except HdrioError as error:  # the exposures are the node's fields
-            self.report({"ERROR"}, str(error).replace("given by --exposures",
-                                                      "in the node's Bracket fields"))
+        except HdrioError as error:
+            self.report({"ERROR"}, in_panel_words(str(error), NODE_EXPOSURES))
             return {"CANCELLED"}
         node.set_response(response_to_json(
             result.response, f"{result.response.method} from {len(paths)} brackets",
