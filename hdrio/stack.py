@@ -8,7 +8,10 @@ import numpy as np
 
 from hdrio.errors import InputError
 
-MIN_EXPOSURE_STEP = 0.01  # neighbouring exposures must differ by at least 1 %
+MIN_EXPOSURE_STEP = 0.01
+"""Exposures closer than this (relative) are the same exposure. Cameras step exposure in
+thirds of a stop; frames closer than 1 % are repeats, as a bracket capped by the camera's
+shortest or longest shutter time gives (:func:`repeated_exposures`)."""
 
 
 @dataclass(frozen=True)
@@ -119,11 +122,48 @@ class ExposureStack:
         return np.log(self.exposures)
 
 
-def first_too_close(exposures: np.ndarray) -> int | None:
+def first_too_close(exposures: np.ndarray, same=None) -> int | None:
     """The first ``j`` whose next exposure is not :data:`MIN_EXPOSURE_STEP` longer (the
-    brackets are in exposure order), or ``None``."""
-    close = np.flatnonzero(exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP))
+    brackets are in exposure order), or ``None``; ``same``: exposures ``(P,)`` by which
+    neighbours that are the same exposure (:func:`repeated_exposures`) need not be
+    ordered (a repeat's estimate from the data may fall either side of its twin's)."""
+    close = exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
+    if same is not None:
+        same = np.asarray(same, np.float64)
+        close &= ~_same_as_before(same)
+    close = np.flatnonzero(close)
     return int(close[0]) if close.size else None
+
+
+def _same_as_before(exposures: np.ndarray) -> np.ndarray:
+    """``(P - 1,)``: whether each bracket after the first has the same exposure as the
+    one before it (sorted exposures, within :data:`MIN_EXPOSURE_STEP`)."""
+    return exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
+
+
+def repeated_exposures(exposures) -> list[tuple[int, ...]]:
+    """The groups (two brackets or more, indices) of sorted ``exposures`` ``(P,)`` that
+    are the same exposure: each neighbour within :data:`MIN_EXPOSURE_STEP` of the one
+    before it. A camera capped at its shortest or longest shutter time repeats it; the
+    frames are merged as observations of one exposure."""
+    exposures = np.asarray(exposures, np.float64)
+    groups, current = [], [0]
+    for j, same in enumerate(_same_as_before(exposures), start=1):
+        if same:
+            current.append(j)
+            continue
+        if len(current) > 1:
+            groups.append(tuple(current))
+        current = [j]
+    if len(current) > 1:
+        groups.append(tuple(current))
+    return groups
+
+
+def distinct_exposures(exposures) -> int:
+    """How many different exposures sorted ``exposures`` holds (repeats counted once)."""
+    exposures = np.asarray(exposures, np.float64)
+    return int(exposures.size - np.count_nonzero(_same_as_before(exposures)))
 
 
 def validate_stack(stack: ExposureStack) -> None:
@@ -139,15 +179,14 @@ def validate_stack(stack: ExposureStack) -> None:
     for name, value in zip(files, exposures):
         if not np.isfinite(value) or value <= 0:
             raise InputError(name, f"exposure must be a positive number, got {value!r}")
-    # Cameras step exposure in thirds of a stop; brackets closer than 1 % are the same
-    # exposure, and differ only by noise, which says nothing about the response.
-    j = first_too_close(exposures)
-    if j is not None:
-        raise InputError(
-            files[j + 1],
-            f"same exposure ({exposures[j + 1]:g}) as {files[j]} ({exposures[j]:g}): every "
-            "bracket needs its own exposure",
-        )
+    # Sorted: a repeat of an exposure (within 1 %) is allowed, a shorter one after a
+    # longer one is not (a caller's replace() that broke the order).
+    behind = np.flatnonzero(exposures[1:] < exposures[:-1] * (1.0 - MIN_EXPOSURE_STEP))
+    if behind.size:
+        j = int(behind[0])
+        raise InputError(files[j + 1], f"exposure ({exposures[j + 1]:g}) shorter than "
+                                       f"{files[j]}'s ({exposures[j]:g}), before which it "
+                                       "is sorted")
     if codes.dtype.kind == "u" and np.iinfo(codes.dtype).max <= stack.code_max:
         return  # every value fits: no pass over the codes needed
     if codes.min() < 0 or codes.max() > stack.code_max:

@@ -157,7 +157,7 @@ def test_images_of_different_sizes(write_brackets, tmp_path, out_dir, capsys):
 
 def test_duplicate_exposure_times(brackets, out_dir, capsys):
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "1/8,1/8,1"),
-                    out_dir, str(brackets[1]), "same exposure")
+                    out_dir, str(brackets[1]), "same exposure", "not the same picture")
 
 
 def test_wrong_number_of_exposures(brackets, out_dir, capsys):

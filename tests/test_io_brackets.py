@@ -208,12 +208,13 @@ def test_unsorted_input_is_sorted_with_files_and_codes(write_brackets):
         assert np.array_equal(codes, read_codes(path)[0])  # exact: the same stored codes
 
 
-def test_duplicate_exposures_name_the_second_file(write_brackets):
+def test_a_repeated_exposure_is_read_in_the_order_given(write_brackets):
+    # A repeat (a ladder capped by the shutter) is a stack of its own right; whether its
+    # frames are one picture is the merge's check (tests/test_repeated_exposures.py).
     paths = write_brackets(names=["a.png", "b.png", "c.png"], exposures=[1, 2, 3])
-    with pytest.raises(InputError, match="same exposure") as error:
-        read_brackets(paths, exposures=["1/8", "1", "1/8"])
-    assert error.value.path in {str(paths[0]), str(paths[2])}
-    assert str(paths[0]) in str(error.value) and str(paths[2]) in str(error.value)
+    stack = read_brackets(paths, exposures=["1/8", "1", "1/8"])
+    assert stack.exposures.tolist() == [0.125, 0.125, 1.0]
+    assert stack.files == (str(paths[0]), str(paths[2]), str(paths[1]))  # ties as given
 
 
 def test_different_sizes_name_the_odd_file(write_brackets, tmp_path):

@@ -26,6 +26,7 @@ from hdrio.job.output import saturation_rule
 from hdrio.job.result import MergeResult
 from hdrio.job.run import merge_files
 from hdrio.radiometry.curve import CameraResponse, linear_deviation
+from hdrio.stack import ExposureStack, repeated_exposures
 from hdrio.tonemap import TONEMAP_METHODS
 
 
@@ -201,6 +202,7 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
         + (", then from the data" if result.exposures and result.exposures.used
            and not inferred else "")
         + f"), read in {times['read']:.2f} s",
+        *[f"repeated:  {line}" for line in repeat_lines(stack)],
         *([f"upright:   as the EXIF says, {upright}"] if upright else []),
         *([f"exposures: {inferred}"] if inferred else []),
         f"response:  {result.response.method}, lambda {params.get('smoothing', 0):g}, "
@@ -231,6 +233,14 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     if preview is not None:
         lines.append(f"preview:   {preview} ({tonemap}) in {times['preview']:.2f} s")
     return "\n".join(lines)
+
+
+def repeat_lines(stack: ExposureStack) -> list[str]:
+    """The summary's ``repeated:`` lines: frames that share an exposure
+    (:func:`hdrio.stack.repeated_exposures`), each merged as an observation of it."""
+    return [f"{', '.join(Path(stack.files[j]).name for j in group)} at "
+            f"{_seconds(stack.exposures[group[0]])}: the same exposure, each frame merged"
+            for group in repeated_exposures(stack.exposures)]
 
 
 def motion_lines(result: MergeResult) -> list[str]:

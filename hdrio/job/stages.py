@@ -28,6 +28,7 @@ from hdrio.merge.exclusion import colour_exclusion, either
 from hdrio.merge.exposure_check import ExposureCheck, exposures_from_data
 from hdrio.merge.ladder import (
     check_exposure_order,
+    check_repeated_exposures,
     in_brightness_order,
     infer_exposures,
     needs_inference,
@@ -119,6 +120,7 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
         stack = in_brightness_order(stack)
     else:  # exposures that belong to other files stop here, not in a flat response
         check_exposure_order(stack, filtered)
+        check_repeated_exposures(stack)
     if options.exposures_from_data and (stack.count < 3 or filtered is not None):
         raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
                          f"(the filters are measured on their own); got {stack.count} "

@@ -32,7 +32,7 @@ from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.skips import well_exposed_codes
-from hdrio.stack import ExposureStack, first_too_close
+from hdrio.stack import ExposureStack, distinct_exposures, first_too_close
 
 WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
@@ -172,9 +172,9 @@ def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
 def exposure_slope(log_t: np.ndarray, meta: np.ndarray) -> float:
     """The Theil-Sen slope of ``log_t`` (the data's log exposures) against ``meta`` (the
     metadata's): the median of the pairwise slopes, the data's stops per metadata stop.
-    NaN for fewer than three brackets (two give one slope, which cannot tell a wrong
-    exposure from a wrong response)."""
-    if log_t.size < 3:
+    NaN for fewer than three different exposures (two give one slope, which cannot tell
+    a wrong exposure from a wrong response; a repeat adds none)."""
+    if distinct_exposures(np.exp(meta)) < 3:
         return math.nan
     j, k = np.triu_indices(log_t.size, 1)
     spread = meta[k] - meta[j]
@@ -404,7 +404,7 @@ def exposures_from_data(stack: ExposureStack, response: CameraResponse, use: boo
                                           exclude)
     if use:
         for _ in range(iterations if solve is not None else 0):
-            stack = replace(stack, exposures=in_order(stack.files, estimated))
+            stack = replace(stack, exposures=in_order(stack.files, estimated, metadata))
             response = solve(stack)
             again, slope = estimate_exposures(stack.codes, metadata, response, unmeasured,
                                               exclude)
@@ -412,17 +412,19 @@ def exposures_from_data(stack: ExposureStack, response: CameraResponse, use: boo
             estimated = again
             if moved < tolerance_stops:
                 break
-        stack = replace(stack, exposures=in_order(stack.files, estimated))
+        stack = replace(stack, exposures=in_order(stack.files, estimated, metadata))
     return stack, response, ExposureCheck(tuple(stack.files), metadata, estimated, use,
                                           unmeasured=tuple(int(j) for j in unmeasured),
                                           slope=slope)
 
 
-def in_order(files: Sequence[str], estimated: np.ndarray) -> np.ndarray:
+def in_order(files: Sequence[str], estimated: np.ndarray,
+             metadata: np.ndarray | None = None) -> np.ndarray:
     """``estimated``, where each bracket is longer than the one before it (as the stack
-    is sorted); else an error naming the first that is not, instead of merging with
-    exposures the brackets themselves contradict."""
-    j = first_too_close(estimated)
+    is sorted), but where ``metadata`` gives both the same exposure (a repeat:
+    :func:`hdrio.stack.repeated_exposures`); else an error naming the first that is not,
+    instead of merging with exposures the brackets themselves contradict."""
+    j = first_too_close(estimated, metadata)
     if j is not None:
         raise InputError(files[j + 1], (
             "--exposures-from-data: the data say its exposure is "

@@ -59,6 +59,7 @@ from hdrio.response.sampling import (
     sample_codes,
     tutorial_sample_count,
 )
+from hdrio.stack import distinct_exposures
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -79,6 +80,12 @@ _UNDETERMINED = (
     "the samples do not determine the camera response (the brackets show too little "
     "variation between exposures: a flat, constant or fully clipped scene?); use more or "
     "better-exposed brackets, or a saved response"
+)
+
+_ONE_EXPOSURE = (
+    "every frame has the same exposure ({}): one exposure cannot show the camera "
+    "response; merge such a burst through a known one (--response-from EXR, from an "
+    "earlier merge; --response linear for linear data)"
 )
 
 
@@ -271,6 +278,8 @@ def response_Debevec1997(stack, smoothing: float = DEFAULT_SMOOTHING, *,
     ``parameters["channels_solved"]`` says how many solves ran.
     """
     code_max = stack.code_max
+    if distinct_exposures(stack.exposures) < 2:
+        raise ResponseSolveError(_ONE_EXPOSURE.format(f"{stack.exposures[0]:g}"))
     if spacing is None:
         spacing = "even" if levels else deep_spacing(stack, smoothing, weighting)
     levels = levels or solve_levels(code_max)[0]

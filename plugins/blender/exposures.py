@@ -25,8 +25,9 @@ def exposures_for_files(paths: Sequence[str | Path]) -> tuple[list[float], str]:
     """Exposure of each file in ``paths``, in the order given (seconds, or relative), and
     where hdrio found them (its ``exposure_sources``: ``"exif"``, ``"filename"``, ...).
 
-    Raises :class:`hdrio.InputError` naming the file when the set has no exposures, the
-    images differ in size, or two exposures coincide.
+    Raises :class:`hdrio.InputError` naming the file when the set has no exposures or the
+    images differ in size (two frames may share an exposure: the merge checks that they
+    are one picture, :func:`hdrio.merge.ladder.check_repeated_exposures`).
     """
     stack = read_brackets(paths)
     by_file = dict(zip(stack.files, stack.exposures.tolist()))
