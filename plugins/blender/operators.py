@@ -8,6 +8,7 @@ line naming the file and the problem, and the operator is cancelled: no tracebac
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -55,12 +56,19 @@ NODE_EXPOSURES = "in the node's Bracket fields"
 """Where the HDR Merge node's Solve takes its exposures from."""
 
 
+COMMAND_ONLY = re.compile(r"(?<![\w-])(--nd|--response-from|--response linear)\b")
+"""hdrio merge's options that neither the panel nor the node has: a message naming one
+names the command."""
+
+
 def in_panel_words(text: str, exposures: str = PANEL_EXPOSURES) -> str:
     """``text`` (hdrio's message) with the merge options in Blender's words: exposures
-    given by ``--exposures`` are ``exposures`` (the panel's or the node's), and
-    ``--exposures-from-data`` is the panel's Exposures From Data."""
-    return text.replace("given by --exposures", exposures).replace(
+    given by ``--exposures`` are ``exposures`` (the panel's or the node's),
+    ``--exposures-from-data`` is the panel's Exposures From Data, and the options only
+    the command has (:data:`COMMAND_ONLY`) are ``hdrio merge``'s."""
+    text = text.replace("given by --exposures", exposures).replace(
         "--exposures-from-data", "Exposures From Data")
+    return COMMAND_ONLY.sub(r"hdrio merge \1", text)
 
 
 def exposure_warnings(result) -> list[str]:
@@ -205,7 +213,7 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
                 self.report({"ERROR"}, in_panel_words(str(error)))
             return {"CANCELLED"}
         except HdrioError as error:
-            self.report({"ERROR"}, str(error))
+            self.report({"ERROR"}, in_panel_words(str(error)))
             return {"CANCELLED"}
         for line in exposure_warnings(result):
             self.report({"WARNING"}, line)

@@ -370,6 +370,22 @@ def test_merge_to_exr_warns_of_an_exposure_the_data_contradict(write_brackets, t
     assert not (tmp_path / "reversed.exr").exists()
 
 
+def test_merge_to_exr_names_the_command_for_an_option_blender_lacks(write_brackets,
+                                                                     tmp_path):
+    # Frames that all share one exposure (a burst) merge only through a known response,
+    # which only `hdrio merge` takes: the report names the command's options as its own.
+    # (Rendered 1 % apart, so that the two frames are not one image twice.)
+    paths = write_brackets((1 / 4, 1.01 / 4), names=["a.png", "b.png"])
+    with pytest.raises(RuntimeError, match="same exposure") as refused:
+        bpy.ops.hdrio.merge_to_exr(
+            directory=str(paths[0].parent), files=[{"name": p.name} for p in paths],
+            output=str(tmp_path / "burst.exr"), exposures="1/4 1/4")
+    said = str(refused.value)
+    assert "hdrio merge --response-from EXR" in said and "hdrio merge --response linear" \
+        in said, said
+    assert not (tmp_path / "burst.exr").exists()
+
+
 def test_tonemap_local_operator_matches_hdrio(tmp_path):
     radiance = demo_scene(48, 64)
     source = write_exr(tmp_path / "scene.exr", radiance, pixel_type="float")
