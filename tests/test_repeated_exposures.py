@@ -104,6 +104,17 @@ def test_exposures_from_the_data_keep_a_repeat_together():
     result = merge_stack(case.stack(), MergeOptions(exposures_from_data=True))
     check = result.exposures
     assert np.all(np.abs(np.log2(check.estimated / check.metadata)) <= 0.05)
+    # The shutter's jitter: the second frame of the repeat shot 10 % shorter than its
+    # twin, the metadata the same. The data say so; the stack keeps its order (the
+    # later twin takes the earlier one's estimate) instead of stopping the merge.
+    shot = times.copy()
+    shot[1] *= 0.9
+    jittered = _render("jittered", [scene] * 7, shot, _camera("png"), 0)
+    stack = ExposureStack.from_arrays(jittered.codes, times)
+    result = merge_stack(stack, MergeOptions(exposures_from_data=True))
+    assert result.exposures.estimated[1] < 0.95 * result.exposures.estimated[0]
+    assert result.stack.exposures[1] == result.stack.exposures[0]
+    assert np.all(np.diff(result.stack.exposures) >= 0)
 
 
 def test_a_burst_of_one_exposure_merges_through_a_known_response():

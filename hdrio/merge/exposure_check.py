@@ -32,7 +32,12 @@ from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
 from hdrio.skips import well_exposed_codes
-from hdrio.stack import ExposureStack, distinct_exposures, first_too_close
+from hdrio.stack import (
+    ExposureStack,
+    distinct_exposures,
+    first_too_close,
+    repeated_exposures,
+)
 
 WARN_STOPS = 1 / 6
 """A bracket whose estimate differs from its metadata by more than this is named."""
@@ -423,7 +428,9 @@ def in_order(files: Sequence[str], estimated: np.ndarray,
     """``estimated``, where each bracket is longer than the one before it (as the stack
     is sorted), but where ``metadata`` gives both the same exposure (a repeat:
     :func:`hdrio.stack.repeated_exposures`); else an error naming the first that is not,
-    instead of merging with exposures the brackets themselves contradict."""
+    instead of merging with exposures the brackets themselves contradict. A repeat's
+    frames keep the stack's order: where the data put a later one shorter, it takes the
+    earlier one's estimate (a shutter's jitter between two frames of one exposure)."""
     j = first_too_close(estimated, metadata)
     if j is not None:
         raise InputError(files[j + 1], (
@@ -433,5 +440,10 @@ def in_order(files: Sequence[str], estimated: np.ndarray,
             "do not agree on the scene (something moved, or they could not be "
             "registered), so their exposures cannot come from the data: give them "
             "(--exposures), or merge with the metadata's (no --exposures-from-data)"))
+    if metadata is None:
+        return estimated
+    estimated = np.array(estimated, np.float64)
+    for group in repeated_exposures(metadata):
+        estimated[list(group)] = np.maximum.accumulate(estimated[list(group)])
     return estimated
 
