@@ -224,6 +224,17 @@ def test_different_sizes_name_the_odd_file(write_brackets, tmp_path):
         read_brackets([*big, *small])
     assert error.value.path == str(small[0])
     assert "32x24" in error.value.problem and "64x48" in error.value.problem
+    assert "turned" not in error.value.problem
+
+
+def test_a_bracket_turned_a_quarter_is_said_to_be(write_brackets, tmp_path):
+    # A file stored in portrait among landscape ones, with no EXIF Orientation to turn
+    # it: the sizes are each other's turned, and the message says what to do.
+    wide = write_brackets([1 / 4, 1.0])
+    tall = write_brackets([4.0], size=(64, 48), folder=tmp_path / "tall")
+    with pytest.raises(InputError, match="turned a quarter against it") as error:
+        read_brackets([*wide, *tall])
+    assert error.value.path == str(tall[0])
 
 
 def test_8_and_16_bit_brackets_do_not_mix(write_brackets, tmp_path):

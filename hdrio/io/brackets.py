@@ -246,11 +246,8 @@ def read_brackets(
     first = headers[0]
     for header in headers[1:]:
         if header.shape != first.shape or header.code_max != first.code_max:
-            raise InputError(
-                header.path,
-                f"is {_describe(header.shape, header.code_max)} but {paths[0]} is "
-                f"{_describe(first.shape, first.code_max)}: brackets must match",
-            )
+            raise _mismatch(header.path, header.shape, header.code_max, paths[0],
+                            first.shape, first.code_max)
     values, source = _resolve_exposures(paths, [h.exif for h in headers], exposures,
                                         exposures_from, infer_exposures)
     if source == PLACEHOLDERS:  # the exposure order is not known before decoding
@@ -373,16 +370,26 @@ def _raw_stack(paths: list[Path], exposures, exposures_from, progress,
     first_codes, code_max, _ = decoded[0]
     for path, (codes, this_max, _) in zip(paths, decoded):
         if codes.shape != first_codes.shape or this_max != code_max:
-            raise InputError(
-                path,
-                f"is {_describe(codes.shape, this_max)} but {paths[0]} is "
-                f"{_describe(first_codes.shape, code_max)}: brackets must match",
-            )
+            raise _mismatch(path, codes.shape, this_max, paths[0], first_codes.shape,
+                            code_max)
     exif = [entry[2] for entry in decoded]
     values, source = _resolve_exposures(paths, exif, exposures, exposures_from, infer)
     return ExposureStack.from_arrays(
         np.stack([entry[0] for entry in decoded]), values, files=[str(p) for p in paths],
         code_max=code_max, exposure_sources=[source] * len(paths), metadata=exif)
+
+
+def _mismatch(path, shape: tuple[int, int, int], code_max: int, first,
+              first_shape: tuple[int, int, int], first_max: int) -> InputError:
+    """The error for a bracket unlike the first: both described; where it is the first
+    turned a quarter (its width the other's height), said so: a file stored in another
+    orientation than the set's, which no EXIF ``Orientation`` turned back."""
+    turned = (shape[:2] == first_shape[1::-1] and shape[2] == first_shape[2]
+              and code_max == first_max)
+    return InputError(path, f"is {_describe(shape, code_max)} but {first} is "
+                            f"{_describe(first_shape, first_max)}: brackets must match"
+                      + ("; it is turned a quarter against it (stored in another "
+                         "orientation): turn it to match" if turned else ""))
 
 
 def _describe(shape: tuple[int, int, int], code_max: int) -> str:
