@@ -15,6 +15,13 @@ channels next to a clip; deghosting ignores them too).
 
 A term the data cannot fix takes the floor of the encoding
 (:func:`hdrio.radiometry.noise.encoding_floors`), never zero.
+
+Two frames of one exposure (a repeat: a ladder capped by the shutter) are not a pair of
+the fit: their estimates share the response's error (the same code reads the same
+``f^-1``), and a JPEG's quantisation of one picture, so they disagree by less than the
+model says two brackets do. Fitted with them, a 7-frame JPEG ladder of the Desk scene
+with one exposure repeated came out with a fifth of the plain ladder's code noise and a
+third of its red shot noise.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ from hdrio.radiometry.noise import (
     code_slope,
     encoding_floors,
 )
-from hdrio.stack import exposure_columns
+from hdrio.stack import MIN_EXPOSURE_STEP, exposure_columns
 
 NOISE_GRID_LIMIT = 2**14
 """Pixels the fit reads: a regular grid of at most this many (as the sampler's grid)."""
@@ -101,6 +108,8 @@ def _pairs(grid, near, exposures, X, slope2, c, code_max):
     pair index, shorter code, longer code)``; ``near`` ``(P, n)`` or ``None``."""
     out = [[] for _ in range(6)]
     for j in range(grid.shape[0] - 1):
+        if exposures[j + 1, c] < exposures[j, c] * (1.0 + MIN_EXPOSURE_STEP):
+            continue  # a repeat (hdrio.stack.repeated_exposures): see the module docstring
         zs, zl = grid[j, :, c].astype(np.intp), grid[j + 1, :, c].astype(np.intp)
         ok = (zs > 0) & (zl > 0) & (zs < CLIP_TOP * code_max) & (zl < CLIP_TOP * code_max)
         if near is not None:
