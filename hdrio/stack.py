@@ -122,22 +122,23 @@ class ExposureStack:
         return np.log(self.exposures)
 
 
-def first_too_close(exposures: np.ndarray, same=None) -> int | None:
+def first_too_close(exposures: np.ndarray, given=None) -> int | None:
     """The first ``j`` whose next exposure is not :data:`MIN_EXPOSURE_STEP` longer (the
-    brackets are in exposure order), or ``None``; ``same``: exposures ``(P,)`` by which
+    brackets are in exposure order), or ``None``; ``given``: exposures ``(P,)`` by which
     neighbours that are the same exposure (:func:`repeated_exposures`) need not be
     ordered (a repeat's estimate from the data may fall either side of its twin's)."""
-    close = exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
-    if same is not None:
-        same = np.asarray(same, np.float64)
-        close &= ~_same_as_before(same)
+    close = same_as_before(exposures)
+    if given is not None:
+        close &= ~same_as_before(given)
     close = np.flatnonzero(close)
     return int(close[0]) if close.size else None
 
 
-def _same_as_before(exposures: np.ndarray) -> np.ndarray:
+def same_as_before(exposures) -> np.ndarray:
     """``(P - 1,)``: whether each bracket after the first has the same exposure as the
-    one before it (sorted exposures, within :data:`MIN_EXPOSURE_STEP`)."""
+    one before it (sorted exposures ``(P,)``, within :data:`MIN_EXPOSURE_STEP`), or is
+    shorter."""
+    exposures = np.asarray(exposures, np.float64)
     return exposures[1:] < exposures[:-1] * (1.0 + MIN_EXPOSURE_STEP)
 
 
@@ -148,7 +149,7 @@ def repeated_exposures(exposures) -> list[tuple[int, ...]]:
     frames are merged as observations of one exposure."""
     exposures = np.asarray(exposures, np.float64)
     groups, current = [], [0]
-    for j, same in enumerate(_same_as_before(exposures), start=1):
+    for j, same in enumerate(same_as_before(exposures), start=1):
         if same:
             current.append(j)
             continue
@@ -163,7 +164,7 @@ def repeated_exposures(exposures) -> list[tuple[int, ...]]:
 def distinct_exposures(exposures) -> int:
     """How many different exposures sorted ``exposures`` holds (repeats counted once)."""
     exposures = np.asarray(exposures, np.float64)
-    return int(exposures.size - np.count_nonzero(_same_as_before(exposures)))
+    return int(exposures.size - np.count_nonzero(same_as_before(exposures)))
 
 
 def validate_stack(stack: ExposureStack) -> None:

@@ -42,7 +42,7 @@ from hdrio.radiometry.noise import (
     code_slope,
     encoding_floors,
 )
-from hdrio.stack import MIN_EXPOSURE_STEP, exposure_columns
+from hdrio.stack import exposure_columns, same_as_before
 
 NOISE_GRID_LIMIT = 2**14
 """Pixels the fit reads: a regular grid of at most this many (as the sampler's grid)."""
@@ -107,8 +107,9 @@ def _pairs(grid, near, exposures, X, slope2, c, code_max):
     below the top codes, not near a clip): ``(regressors (n, 4), difference, brightness,
     pair index, shorter code, longer code)``; ``near`` ``(P, n)`` or ``None``."""
     out = [[] for _ in range(6)]
+    repeat = same_as_before(exposures[:, c])
     for j in range(grid.shape[0] - 1):
-        if exposures[j + 1, c] < exposures[j, c] * (1.0 + MIN_EXPOSURE_STEP):
+        if repeat[j]:
             continue  # a repeat (hdrio.stack.repeated_exposures): see the module docstring
         zs, zl = grid[j, :, c].astype(np.intp), grid[j + 1, :, c].astype(np.intp)
         ok = (zs > 0) & (zl > 0) & (zs < CLIP_TOP * code_max) & (zl < CLIP_TOP * code_max)
