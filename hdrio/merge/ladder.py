@@ -296,7 +296,8 @@ def check_repeated_exposures(stack: ExposureStack) -> None:
                     f"{100 * difference:.0f} % (the median over blocks; frames of one "
                     f"exposure differ by noise, under {100 * REPEAT_AGREEMENT:.0f} %): the "
                     "exposures belong to other files, or the list holds two bracket sets "
-                    "(hdrio batch splits a folder into sets)"))
+                    "(hdrio FOLDER --group --merge -o {first_stem}.exr merges each set of "
+                    "a shoot)"))
 
 
 def in_brightness_order(stack: ExposureStack) -> ExposureStack:
