@@ -106,6 +106,22 @@ def test_merge_node_matches_hdrio_merge_command_on_real_brackets(shared_data, tm
     assert_matches_command("frobisher", merged, paths, tmp_path)
 
 
+def test_merge_node_merges_a_repeated_exposure_as_hdrio_merge(write_brackets, tmp_path):
+    # A ladder capped by the shutter: two frames named for 1/16 s (rendered 1 % apart, so
+    # that they are two frames, not one image twice). The node wires them side by side,
+    # shortest first, ties in the order linked, and merges as `hdrio merge` does.
+    size = (40, 96)
+    paths = write_brackets((1 / 16, 1.01 / 16, 1 / 4, 1.0), size=size,
+                           names=["c_1_16.png", "d_1_16.png", "e_1_4.png", "f_1_1.png"])
+    scene = bpy.context.scene
+    node = solved_merge_node(clean_compositor(scene), paths)
+    assert node.bracket_exposures() == pytest.approx([1 / 16, 1 / 16, 1 / 4, 1.0])
+    merged = render_to_exr(scene, node.outputs[0], tmp_path / "repeat.exr", size)
+    assert_matches_merge("repeat", merged,
+                         merge_stack(read_brackets(paths), MergeOptions()).radiance)
+    assert_matches_command("repeat", merged, paths, tmp_path)
+
+
 def test_merge_node_reconstructs_highlights_as_hdrio_merge(shared_data, tmp_path):
     # Highlights: Reconstruct is `hdrio merge --highlights reconstruct`, hdrio's own
     # (baked by the Solve), multiplied into the node's merge.
