@@ -155,6 +155,19 @@ def test_images_of_different_sizes(write_brackets, tmp_path, out_dir, capsys):
                     str(small[0]), "32x24", "64x48", "must match")
 
 
+def test_exposures_are_typed_with_commas_or_spaces_and_a_unit(brackets, out_dir, capsys):
+    # As Blender's Exposures field reads them (hdrio.io.exposure.split_exposures).
+    typed = ("1/16,1/4,1,4", "1/16 1/4 1 4", "1/16 s, 1/4 s, 1 s, 4 s", '1/16,1/4,1,4"')
+    headers = []
+    for k, exposures in enumerate(typed):
+        exr = out_dir / f"typed{k}.exr"
+        code, _, err = run(capsys, "merge", *brackets, "-o", exr, "-q", "--exposures",
+                           exposures)
+        assert code == 0, err
+        headers.append(OpenEXR.File(str(exr)).header()["hdrio:exposures"])
+    assert all(header == headers[0] for header in headers)
+
+
 def test_duplicate_exposure_times(brackets, out_dir, capsys):
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "1/8,1/8,1"),
                     out_dir, str(brackets[1]), "same exposure", "not the same picture")

@@ -34,6 +34,9 @@ from hdrio.io.exposure import (
         ("1e-3", 0.001),
         (0.25, 0.25),
         (2, 2.0),
+        ("1/60s", 1 / 60),  # a unit, as a camera's or an editor's list prints it
+        ("1/60 s", 1 / 60),
+        ('30"', 30.0),  # a camera's display: 30" is 30 s
     ],
 )
 def test_parse_exposure_accepts_fractions_decimals_and_numbers(text, seconds):
@@ -42,12 +45,29 @@ def test_parse_exposure_accepts_fractions_decimals_and_numbers(text, seconds):
 
 @pytest.mark.parametrize(
     "text",
-    ["", "abc", "1/", "/60", "1//60", "1/2/3", "1/inf", "1/nan", "1/60s", "1,5", "inf",
+    ["", "abc", "1/", "/60", "1//60", "1/2/3", "1/inf", "1/nan", "s", "1/60 ss", "1,5", "inf",
      "nan", "1/0", "0", "0/1", "0.0", "-1/60", "-2", -0.5, 0, 0.0, float("inf"), float("nan")],
 )
 def test_parse_exposure_rejects_bad_zero_and_negative_values(text):
     with pytest.raises(ValueError):
         parse_exposure(text)
+
+
+@pytest.mark.parametrize(
+    ("text", "times"),
+    [
+        ("1/8,1,8", ["1/8", "1", "8"]),
+        ("1/8 1 8", ["1/8", "1", "8"]),
+        (" 1/8  1\t8 ", ["1/8", "1", "8"]),
+        ("1/8 s, 1 s, 8 s", ["1/8 s", "1 s", "8 s"]),  # commas first: a unit keeps its space
+        ("1/8,1,", ["1/8", "1", ""]),  # an empty item is the parser's to refuse
+    ],
+)
+def test_a_list_of_exposures_is_split_at_commas_else_at_spaces(text, times):
+    # hdrio merge --exposures and Blender's Exposures field read a list the same way.
+    from hdrio.io.exposure import split_exposures
+
+    assert split_exposures(text) == times
 
 
 def test_parse_exposure_rejects_values_too_large_for_a_float():

@@ -127,8 +127,9 @@ _EXPOSURE = "exposures"
 
 MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--exposures", ("LIST",), "exposures", exposure_list, example=("1/8,1,8",),
-           group=_EXPOSURE, help="exposure times in seconds, in image order, comma-separated "
-                                 "(1/8,1,8); wins over every other source"),
+           group=_EXPOSURE, help="exposure times in seconds, in image order, separated by "
+                                 "commas (1/8,1,8) or spaces ('1/8 1 8'); wins over every "
+                                 "other source"),
     Option("--exposures-from", ("FILE",), "exposures_from", text, group=_EXPOSURE,
            example=("exposures.csv",),
            help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "

@@ -85,9 +85,9 @@ def choice(*choices: str) -> Callable[[list[str]], str]:
 
 
 def exposure_list(values: list[str]) -> tuple[str, ...]:
-    from hdrio.io.exposure import parse_exposure
+    from hdrio.io.exposure import parse_exposure, split_exposures
 
-    times = tuple(t.strip() for t in values[0].split(","))
+    times = tuple(split_exposures(values[0]))
     for text in times:
         parse_exposure(text)  # a typo fails here, before any image is read
     return times

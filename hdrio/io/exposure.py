@@ -26,16 +26,27 @@ from pathlib import Path
 from hdrio.errors import InputError
 
 _INTEGER = re.compile(r"\d+")
+_SECONDS = re.compile(r"\s*(s|\")$")
+"""A unit after a time: ``1/8 s``, ``1/8s``, or a camera's seconds mark, ``8"``."""
+
+
+def split_exposures(text: str) -> list[str]:
+    """Exposure times as typed in one field: separated by commas, or by spaces where
+    there is no comma (``1/8,1,8``, ``1/8 1 8``, ``1/8 s, 1 s, 8 s``), each stripped. Both
+    front ends read a list so: ``hdrio merge --exposures`` and Blender's Exposures."""
+    parts = text.split(",") if "," in text else text.split()
+    return [part.strip() for part in parts]
 
 
 def parse_exposure(text: str | float) -> float:
     """Parse ``"1/60"``, ``"1/3.75"``, ``"0.5"``, ``"30"`` or a number into seconds (a
-    positive float); either side of a ``/`` may be a decimal."""
+    positive float); either side of a ``/`` may be a decimal, and a unit may follow
+    (``1/60 s``, ``30s``, ``30"``)."""
     try:
         if isinstance(text, int | float):
             value = float(text)
         else:
-            parts = text.strip().split("/")
+            parts = _SECONDS.sub("", text.strip()).split("/")
             if len(parts) > 2:
                 raise ValueError
             value = float(Fraction(parts[0].strip()) / Fraction(parts[-1].strip())

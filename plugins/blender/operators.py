@@ -18,6 +18,7 @@ from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 from hdrio.errors import HdrioError, InputError
 from hdrio.io.brackets import read_brackets
+from hdrio.io.exposure import split_exposures
 from hdrio.io.write import EXR_COMPRESSIONS
 from hdrio.job.options import MergeOptions
 from hdrio.job.run import merge_files, merge_stack
@@ -197,7 +198,7 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
             return {"CANCELLED"}
         if not kernels_ready(self):
             return {"CANCELLED"}
-        exposures = self.exposures.replace(",", " ").split() or None
+        exposures = split_exposures(self.exposures) if self.exposures.strip() else None
         try:
             result = merge_files(paths, output, exposures=exposures,
                                  options=MergeOptions(highlights=self.highlights,
