@@ -59,11 +59,13 @@ def test_parse_exposure_rejects_bad_zero_and_negative_values(text):
         ("1/8,1,8", ["1/8", "1", "8"]),
         ("1/8 1 8", ["1/8", "1", "8"]),
         (" 1/8  1\t8 ", ["1/8", "1", "8"]),
-        ("1/8 s, 1 s, 8 s", ["1/8 s", "1 s", "8 s"]),  # commas first: a unit keeps its space
+        ("1/4, 1 4", ["1/4", "1", "4"]),
+        ("1/8 s, 1 s, 8 s", ["1/8 s", "1 s", "8 s"]),  # a unit alone is the time's before it
+        ('1/8 1 8 "', ["1/8", "1", '8 "']),
         ("1/8,1,", ["1/8", "1", ""]),  # an empty item is the parser's to refuse
     ],
 )
-def test_a_list_of_exposures_is_split_at_commas_else_at_spaces(text, times):
+def test_a_list_of_exposures_is_split_at_commas_and_spaces(text, times):
     # hdrio merge --exposures and Blender's Exposures field read a list the same way.
     from hdrio.io.exposure import split_exposures
 

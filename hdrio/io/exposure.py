@@ -31,11 +31,18 @@ _SECONDS = re.compile(r"\s*(s|\")$")
 
 
 def split_exposures(text: str) -> list[str]:
-    """Exposure times as typed in one field: separated by commas, or by spaces where
-    there is no comma (``1/8,1,8``, ``1/8 1 8``, ``1/8 s, 1 s, 8 s``), each stripped. Both
-    front ends read a list so: ``hdrio merge --exposures`` and Blender's Exposures."""
-    parts = text.split(",") if "," in text else text.split()
-    return [part.strip() for part in parts]
+    """Exposure times as typed in one field, separated by commas, spaces or both
+    (``1/8,1,8``, ``1/8 1 8``, ``1/8, 1 8``); a unit standing alone belongs to the time
+    before it (``1/8 s, 1 s, 8 s``). Both front ends read a list so: ``hdrio merge
+    --exposures`` and Blender's Exposures. A trailing comma leaves an empty item, which
+    :func:`parse_exposure` refuses."""
+    times: list[str] = []
+    for token in re.split(r"[\s,]+", text.strip()):
+        if times and _SECONDS.fullmatch(token):
+            times[-1] += f" {token}"
+        else:
+            times.append(token)
+    return times
 
 
 def parse_exposure(text: str | float) -> float:
