@@ -53,6 +53,17 @@ def test_without_capture_times_a_repeated_exposure_starts_a_set():
                                          ["P007.tif", "P008.tif", "P009.tif"]]
 
 
+def test_a_repeat_right_after_its_twin_stays_in_the_set():
+    # Ladders capped by the shutter, shot shortest first with no capture times: the
+    # camera repeated 1/1000 s. Before, the repeat started a set of its own.
+    capped = [1 / 1000, 1 / 1000, 1 / 250, 1 / 60]
+    frames = [Frame(Path(f"P{n:03d}.tif"), t, None, n)
+              for n, t in enumerate(capped * 2, start=1)]
+    sets = group_frames(frames[::-1])
+    assert [_names(s) for s in sets] == [["P001.tif", "P002.tif", "P003.tif", "P004.tif"],
+                                         ["P005.tif", "P006.tif", "P007.tif", "P008.tif"]]
+
+
 def test_frames_stamped_in_the_same_second_keep_sequence_order():
     # A fast burst: EXIF's one-second resolution gives three frames the same stamp.
     frames = [Frame(Path(f"IMG_{n}.jpg"), t, START, n)

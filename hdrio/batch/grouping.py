@@ -12,9 +12,12 @@ number in the file name, then the name), and a new set starts when
   (``--group-size``); otherwise
 * the capture time jumps: more than ``max_gap_s`` seconds after the previous frame
   *ended* (its start plus its exposure time), as when the tripod head turns; or
-* the exposure repeats one already in the current set (within 1 %): a camera's bracket
-  never shoots the same exposure twice, so a repeat is the next set's pattern beginning.
-  This holds whatever the order inside a bracket (auto-exposure bracketing's 0, -2, +2).
+* the exposure repeats one already in the current set (within 1 %), other than the
+  frame's just before it: a camera's bracket rarely shoots the same exposure twice, so a
+  repeat is the next set's pattern beginning. This holds whatever the order inside a
+  bracket (auto-exposure bracketing's 0, -2, +2). A repeat right after its twin stays
+  (a ladder capped by the shutter, shot in exposure order; a burst): no bracket order
+  ends on the exposure the next set starts with.
 
 EXIF times have one-second resolution, so frames of one burst often share a stamp; the
 sequence number orders them.
@@ -178,10 +181,15 @@ def _starts_new_set(current: Sequence[Frame], frame: Frame, timed: bool,
             return True
     if frame.exposure is None:
         return False
-    return any(other.exposure is not None
-               and abs(frame.exposure - other.exposure)
-               <= MIN_EXPOSURE_STEP * max(frame.exposure, other.exposure)
-               for other in current)
+
+    def same(other: Frame) -> bool:
+        return (other.exposure is not None and abs(frame.exposure - other.exposure)
+                <= MIN_EXPOSURE_STEP * max(frame.exposure, other.exposure))
+
+    # A repeat right after its twin is the same set: a ladder capped by the camera's
+    # shutter (shot in exposure order), a burst. No bracket order ends on the exposure
+    # the next set starts with.
+    return not same(previous) and any(same(other) for other in current)
 
 
 def group_brackets(paths: Sequence[str | Path], max_gap_s: float = DEFAULT_MAX_GAP_S,
