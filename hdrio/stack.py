@@ -134,6 +134,12 @@ def first_too_close(exposures: np.ndarray, given=None) -> int | None:
     return int(close[0]) if close.size else None
 
 
+def same_exposure(first: float, second: float) -> bool:
+    """Whether two exposures, in any order, are one: within :data:`MIN_EXPOSURE_STEP` of
+    the longer (:func:`same_as_before` for a sorted array)."""
+    return abs(first - second) <= MIN_EXPOSURE_STEP * max(first, second)
+
+
 def same_as_before(exposures) -> np.ndarray:
     """``(P - 1,)``: whether each bracket after the first has the same exposure as the
     one before it (sorted exposures ``(P,)``, within :data:`MIN_EXPOSURE_STEP`), or is

@@ -34,7 +34,7 @@ from pathlib import Path
 from hdrio.io.brackets import read_exif
 from hdrio.io.exposure import exposure_from_exif, exposure_from_filename
 from hdrio.io.raw import RAW_SUFFIXES
-from hdrio.stack import MIN_EXPOSURE_STEP
+from hdrio.stack import same_exposure
 
 BRACKET_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff"}) | RAW_SUFFIXES
 DEFAULT_MAX_GAP_S = 2.0  # a bracket burst leaves at most ~1 s between frames, plus rounding
@@ -183,8 +183,7 @@ def _starts_new_set(current: Sequence[Frame], frame: Frame, timed: bool,
         return False
 
     def same(other: Frame) -> bool:
-        return (other.exposure is not None and abs(frame.exposure - other.exposure)
-                <= MIN_EXPOSURE_STEP * max(frame.exposure, other.exposure))
+        return other.exposure is not None and same_exposure(frame.exposure, other.exposure)
 
     # A repeat right after its twin is the same set: a ladder capped by the camera's
     # shutter (shot in exposure order), a burst. No bracket order ends on the exposure

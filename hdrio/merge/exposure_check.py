@@ -109,13 +109,12 @@ def estimate_exposures(codes: np.ndarray, exposures: np.ndarray,
     meta = np.log(np.asarray(exposures, np.float64))
     log_t, _ = fit_log_exposures(codes, response, prior=meta, unmeasured=unmeasured,
                                  exclude=exclude)
-    if not len(unmeasured):
-        return np.exp(anchor_Theil_Sen(log_t, meta)), exposure_slope(log_t, meta)
     measured = np.ones(meta.size, bool)
     measured[list(unmeasured)] = False
+    slope = exposure_slope(log_t[measured], meta[measured])
     found = meta.copy()
-    found[measured] = anchor_Theil_Sen(log_t[measured], meta[measured])
-    return np.exp(found), exposure_slope(log_t[measured], meta[measured])
+    found[measured] = anchor_Theil_Sen(log_t[measured], meta[measured], slope)
+    return np.exp(found), slope
 
 
 def fit_log_exposures(codes: np.ndarray, response: CameraResponse,
@@ -187,15 +186,16 @@ def exposure_slope(log_t: np.ndarray, meta: np.ndarray) -> float:
     return float(np.median((log_t[k] - log_t[j])[ok] / spread[ok]))
 
 
-def anchor_Theil_Sen(log_t: np.ndarray, meta: np.ndarray) -> np.ndarray:
+def anchor_Theil_Sen(log_t: np.ndarray, meta: np.ndarray,
+                     slope: float | None = None) -> np.ndarray:
     """``log_t`` mapped onto the metadata's scale: ``(log_t - c) / s`` for the
     Theil-Sen line ``log_t = s meta + c`` (the median of the pairwise slopes,
-    :func:`exposure_slope`, then of the offsets), so one wrong bracket moves neither. A
-    set of brackets and its response are only known up to such a line (``g -> s g +
-    c``, ``ln t -> s ln t + c``: the exponent ambiguity of self-calibration); the
-    metadata's spacing fixes it. Two brackets give no slope: only the offset is
-    fitted."""
-    slope = exposure_slope(log_t, meta)
+    :func:`exposure_slope`, when ``slope`` is not given already measured; then of the
+    offsets), so one wrong bracket moves neither. A set of brackets and its response
+    are only known up to such a line (``g -> s g + c``, ``ln t -> s ln t + c``: the
+    exponent ambiguity of self-calibration); the metadata's spacing fixes it. Two
+    brackets give no slope: only the offset is fitted."""
+    slope = exposure_slope(log_t, meta) if slope is None else slope
     if not slope > 0:  # the data contradict the order (or no slope): trust only the offset
         slope = 1.0
     offset = float(np.median(log_t - slope * meta))

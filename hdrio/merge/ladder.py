@@ -188,6 +188,8 @@ def check_exposure_order(stack: ExposureStack, filtered: np.ndarray | None = Non
     % of the pixels clipped in every bracket, and a warning that named one bracket).
     ``filtered``: the stops of ``--nd`` filter folded into each bracket's exposure, which
     the message then says."""
+    if stack.count < 2:
+        return
     exposures = np.asarray(stack.exposures, np.float64)
 
     def text(j: int) -> str:
@@ -195,8 +197,6 @@ def check_exposure_order(stack: ExposureStack, filtered: np.ndarray | None = Non
         return exposure_text(exposures[j]) + (f" (--nd's {stops:g} stops counted)"
                                               if stops else "")
 
-    if stack.count < 2:
-        return
     levels = _brightness_levels(stack, ORDER_CHECK_PIXELS)
     backwards = np.array_equal(np.argsort(levels.mean(axis=1), kind="stable"),
                                np.arange(stack.count)[::-1])
