@@ -19,6 +19,7 @@ import numpy as np
 
 from hdrio.cli.progress import Progress
 from hdrio.errors import HdrioError
+from hdrio.io.paths import expand_patterns
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff"})
 FLOAT_SUFFIXES = frozenset({".exr", ".hdr"})
@@ -208,7 +209,8 @@ def parse(argv: Sequence[str]) -> list[Step]:
     steps = []
     for name, values in _split(argv):
         if name == "read":
-            steps.append(Step("read", Path(values[0]), values[0]))
+            steps.extend(Step("read", Path(path), str(path))
+                         for path in expand_patterns(values[:1]))
             continue
         text = " ".join([name, *values])
         try:

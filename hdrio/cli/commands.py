@@ -81,9 +81,11 @@ def display_view_from(args: argparse.Namespace, config: str | None
 def run_merge(args: argparse.Namespace) -> int:
     # Everything is checked before any image is read: names, values, colour spaces,
     # displays, output folders.
+    from hdrio.io.paths import check_outputs, expand_patterns
+
+    args.images = expand_patterns(args.images)
     output = Path(args.output)
     preview = Path(args.preview) if args.preview else None
-    from hdrio.io.paths import check_outputs
 
     check_outputs([(path, allowed) for path, allowed in ((output, EXR_SUFFIXES),
                                                          (preview, PREVIEW_SUFFIXES))

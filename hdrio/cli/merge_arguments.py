@@ -294,8 +294,8 @@ def add_arguments(parser: argparse.ArgumentParser, skip: Iterable[str] = (),
                     else option.arguments}
         group.add_argument(*option.spellings, dest=f"option:{option.key}",
                            default=argparse.SUPPRESS, **kind,
-                           help=f"{option.help} (e.g. {option.name} "
-                                f"{shlex.join(option.example)})".replace("%", "%%"))
+                           help=f"{option.help} (e.g. "
+                                f"{shlex.join([option.name, *option.example])})".replace("%", "%%"))
 
 
 def settings_from_namespace(args: argparse.Namespace,

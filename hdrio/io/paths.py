@@ -14,6 +14,7 @@ Output name patterns (``-o '{first_stem}_hdr.exr'``) are filled here too
 from __future__ import annotations
 
 import errno
+import glob
 import os
 import re
 import stat
@@ -57,12 +58,35 @@ def check_input(path: str | Path, what: str = "an image file") -> os.stat_result
     except OSError as error:
         raise InputError(path, _problem(error)) from None
     if stat.S_ISDIR(info.st_mode):
-        raise InputError(path, f"is a folder, not {what}")
+        raise InputError(path, f"is a folder, not {what}: name its files "
+                               f"(e.g. '{Path(path) / '*.jpg'}')")
     if not stat.S_ISREG(info.st_mode):
         raise InputError(path, f"is not a regular file (a device or pipe?), not {what}")
     if not os.access(path, os.R_OK):
         raise InputError(path, "permission denied (cannot read it)")
     return info
+
+
+PATTERN_CHARACTERS = "*?["
+"""What makes an input name a shell pattern (:func:`expand_patterns`)."""
+
+
+def expand_patterns(paths: Iterable[str | Path]) -> list[str | Path]:
+    """``paths``, each name that is no file but a shell pattern (``*``, ``?``, ``[...]``)
+    replaced by the files it matches, sorted as a shell sorts them: a pattern that
+    reached hdrio unexpanded (quoted, Windows' ``cmd``, a script's argument list) reads
+    as it would have from a shell. One that matches nothing is an error naming it."""
+    expanded: list[str | Path] = []
+    for path in paths:
+        name = str(path)
+        if any(c in name for c in PATTERN_CHARACTERS) and not os.path.lexists(name):
+            matches = sorted(glob.glob(name))
+            if not matches:
+                raise InputError(path, "no such file, and as a pattern it matches none")
+            expanded.extend(matches)
+        else:
+            expanded.append(path)
+    return expanded
 
 
 def check_inputs(paths: Sequence[str | Path], what: str = "an image file") -> list[Path]:
