@@ -205,6 +205,8 @@ CASES = [
     Case("pattern unexpanded in a chain",
          lambda d: _rgb(d) and [d / "in" / "bracket_*.png", "--merge", "-o", h.out(d)], 0,
          "wrote"),
+    Case("pattern unexpanded in hdrio info",
+         lambda d: _rgb(d) and ["info", d / "in" / "bracket_1_1*.png"], 0, "bracket_1_16.png"),
     Case("pattern matching nothing", lambda d: h.merge(d, [*_rgb(d), d / "in" / "*.tif"]),
          2, "*.tif: no such file, and as a pattern it matches none"),
     Case("symlink loop input", lambda d: h.merge(d, [*_rgb(d), h.symlink_loop(d / "in")]), 2,

@@ -42,9 +42,10 @@ def run_check(args: argparse.Namespace) -> int:
     import sys
 
     from hdrio.cms.checks import check_exr, format_report
+    from hdrio.io.paths import expand_patterns
 
     faulty = []
-    for index, path in enumerate(args.files):
+    for index, path in enumerate(expand_patterns(args.files)):
         if index:
             print()
         report = check_exr(Path(path), chart=args.chart, gamut=args.gamut)

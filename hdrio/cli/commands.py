@@ -297,8 +297,9 @@ def _short(value) -> str:
 
 def run_info(args: argparse.Namespace) -> int:
     from hdrio.io.header import read_header
+    from hdrio.io.paths import expand_patterns
 
-    for index, path in enumerate(args.files):
+    for index, path in enumerate(expand_patterns(args.files)):
         header = read_header(path)
         if index:
             print()
