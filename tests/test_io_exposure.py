@@ -128,11 +128,29 @@ def test_csv_table_header_names_ignore_case_spaces_and_bom(tmp_path):
 
 def test_csv_table_without_the_required_columns_names_the_file(tmp_path):
     sidecar = tmp_path / "exposures.csv"
-    sidecar.write_text("name,seconds\na.png,1\n", encoding="utf-8")
+    sidecar.write_text("frame,value\na.png,1\n", encoding="utf-8")
     with pytest.raises(InputError) as error:
         read_exposure_table(sidecar)
     assert error.value.path == str(sidecar)
     assert "exposure_time_s" in error.value.problem
+    assert "'frame,value'" in error.value.problem  # the header it found
+
+
+@pytest.mark.parametrize("text", [
+    "filename,shutter\r\na.png,1/8\r\nb.png,2\r\n",  # other names, Windows line ends
+    "Name;Exposure\na.png;0,125\nb.png;2\n",  # a spreadsheet with a decimal comma
+    "image\texposure time\na.png\t1/8 s\nb.png\t2\n",  # tab-separated, a unit
+])
+def test_csv_table_as_spreadsheets_and_scripts_write_it(tmp_path, text):
+    sidecar = tmp_path / "exposures.csv"
+    sidecar.write_bytes(text.encode("utf-8"))
+    assert read_exposure_table(sidecar) == {"a.png": 0.125, "b.png": 2.0}  # exact: binary
+
+
+def test_opencv_list_separated_by_tabs_is_still_opencvs(tmp_path):
+    sidecar = tmp_path / "list.txt"
+    sidecar.write_text("a.png\t32\nb.png\t2\n", encoding="utf-8")
+    assert read_exposure_table(sidecar) == {"a.png": 1 / 32, "b.png": 0.5}  # exact
 
 
 def test_memorial_csv_from_shared_data(shared_data):

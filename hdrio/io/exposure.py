@@ -6,10 +6,15 @@ never mixes, say, EXIF times for some frames with file-name times for others.
 
 Sidecar formats
 ---------------
-CSV with a header naming ``file`` and ``exposure_time_s`` (other columns are ignored)::
+CSV with a header naming the file column and the exposure column (other columns are
+ignored)::
 
     file,exposure_time_s
     church_1.png,0.5
+
+The columns may go by other common names (:data:`FILE_COLUMNS`, :data:`TIME_COLUMNS`:
+``filename,shutter`` too), and the values be separated by semicolons or tabs; with
+semicolons, as a spreadsheet set to a decimal comma saves it, ``0,125`` is 0.125 s.
 
 OpenCV's ``list.txt`` (as read by ``loadExposureSeq``): one ``file value`` per line where
 the value is the *reciprocal* of the exposure time, ``1/t``; ``#`` starts a comment.
@@ -109,23 +114,49 @@ def read_exposure_table(path: str | Path) -> dict[str, float]:
     lines = [(number, line) for number, line in lines if line]
     if not lines:
         raise InputError(path, "exposure list is empty")
-    if "," in lines[0][1]:
-        return _read_csv_table(path, lines)
+    header = lines[0][1]
+    delimiter = next((d for d in (",", ";") if d in header), None)
+    if delimiter is None and "\t" in header and _column(_fields(header, "\t"),
+                                                     FILE_COLUMNS) is not None:
+        delimiter = "\t"  # a tab-separated table; else OpenCV's list, tabs or spaces
+    if delimiter is not None:
+        return _read_csv_table(path, lines, delimiter)
     return _read_opencv_list(path, lines)
 
 
-def _read_csv_table(path: Path, lines: Sequence[tuple[int, str]]) -> dict[str, float]:
+FILE_COLUMNS = ("file", "filename", "file_name", "image", "name", "path")
+"""Names of a CSV exposure list's file column, the first found wins (any case)."""
+TIME_COLUMNS = ("exposure_time_s", "exposure_time", "exposure", "exposuretime", "shutter",
+                "shutter_speed", "time", "seconds")
+"""Names of its exposure column, in seconds, the first found wins (any case)."""
+
+
+def _column(fields: list[str], names: Sequence[str]) -> int | None:
+    return next((fields.index(name) for name in names if name in fields), None)
+
+
+def _fields(header: str, delimiter: str) -> list[str]:
+    """A table's column names as compared: any case, spaces as underscores."""
+    return [name.strip().lower().replace(" ", "_")
+            for name in next(csv.reader([header], delimiter=delimiter))]
+
+
+def _read_csv_table(path: Path, lines: Sequence[tuple[int, str]], delimiter: str = ","
+                    ) -> dict[str, float]:
     header, *rows = lines
-    fields = [name.strip().lower() for name in next(csv.reader([header[1]]))]
-    if "file" not in fields or "exposure_time_s" not in fields:
-        raise InputError(path, "CSV exposure list needs the columns 'file' and 'exposure_time_s'")
-    file_column, time_column = fields.index("file"), fields.index("exposure_time_s")
+    fields = _fields(header[1], delimiter)
+    file_column, time_column = _column(fields, FILE_COLUMNS), _column(fields, TIME_COLUMNS)
+    if file_column is None or time_column is None:
+        raise InputError(path, "CSV exposure list needs a file column ("
+                         + ", ".join(FILE_COLUMNS) + ") and an exposure column in seconds ("
+                         + ", ".join(TIME_COLUMNS) + f"); its header is {header[1]!r}")
     table: dict[str, float] = {}
     for number, line in rows:
-        values = next(csv.reader([line]))
+        values = next(csv.reader([line], delimiter=delimiter))
         try:
             name = values[file_column].strip()
-            table[name] = parse_exposure(values[time_column])
+            time = values[time_column]
+            table[name] = parse_exposure(time.replace(",", ".") if delimiter == ";" else time)
         except (ValueError, IndexError) as error:
             problem = error if isinstance(error, ValueError) else "missing columns"
             raise InputError(path, f"line {number}: {problem}") from None
