@@ -168,6 +168,39 @@ def test_exposures_are_typed_with_commas_or_spaces_and_a_unit(brackets, out_dir,
     assert all(header == headers[0] for header in headers)
 
 
+def exr_rgb(path: Path) -> np.ndarray:
+    return OpenEXR.File(str(path)).channels()["RGB"].pixels
+
+
+def test_exposures_typed_in_ev_merge_as_the_seconds_they_stand_for(brackets, out_dir,
+                                                                   capsys):
+    # Four brackets 2 EV apart, 1/16 .. 4 s. Typed as steps in EV (a leading minus sign
+    # too: argparse would take '-4EV,...' for an option), they are relative exposures,
+    # 0 EV's 1: the same ratios, so the same pixels, and the summary says relative.
+    seconds = out_dir / "seconds.exr"
+    code, _, err = run(capsys, "merge", *brackets, "-o", seconds, "-q", "--exposures",
+                       "1/16,1/4,1,4")
+    assert code == 0, err
+    for k, typed in enumerate(("-4EV,-2EV,0EV,+2EV", "-4 EV, -2 EV, 0 EV, 2 EV")):
+        exr = out_dir / f"ev{k}.exr"
+        code, out, err = run(capsys, "merge", *brackets, "-o", exr, "--exposures", typed)
+        assert code == 0, err
+        assert "relative exposures 0.0625 .. 4 (exposures from EV steps)" in out
+        header = OpenEXR.File(str(exr)).header()
+        assert header["hdrio:exposureSource"] == "EV steps"
+        assert np.array_equal(exr_rgb(exr), exr_rgb(seconds))  # exact: same ratios
+    chain = out_dir / "chain.exr"
+    code, _, err = run(capsys, *brackets, "--exposures", "-4EV,-2EV,0EV,+2EV", "--merge",
+                       "-o", chain)
+    assert code == 0, err
+    assert np.array_equal(exr_rgb(chain), exr_rgb(seconds))
+
+
+def test_exposures_in_ev_and_seconds_mixed_are_refused(brackets, out_dir, capsys):
+    assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "-2EV,1,2EV"),
+                    out_dir, "--exposures -2EV,1,2EV", "'1' beside '-2EV'")
+
+
 def test_duplicate_exposure_times(brackets, out_dir, capsys):
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "1/8,1/8,1"),
                     out_dir, str(brackets[1]), "same exposure", "not the same picture")

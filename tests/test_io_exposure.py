@@ -77,6 +77,51 @@ def test_parse_exposure_rejects_values_too_large_for_a_float():
         parse_exposure("1e400")
 
 
+# ----------------------------------------------------------------------- exposures in EV
+
+
+@pytest.mark.parametrize(
+    ("texts", "exposures", "in_ev"),
+    [
+        (["-2EV", "0EV", "+2EV"], [0.25, 1.0, 4.0], True),
+        (["-2 EV", "0 ev", "2Ev"], [0.25, 1.0, 4.0], True),
+        (["-1/3EV", "+1/3EV"], [2 ** (-1 / 3), 2 ** (1 / 3)], True),
+        (["0.5EV"], [2**0.5], True),
+        (["1/8", "1", "8 s"], [0.125, 1.0, 8.0], False),
+    ],
+)
+def test_a_list_in_ev_is_relative_exposures(texts, exposures, in_ev):
+    from hdrio.io.exposure import explicit_exposures
+
+    values, ev = explicit_exposures(texts)
+    assert ev is in_ev
+    assert values == pytest.approx(exposures, rel=1e-15)  # 2**x: one rounding each
+
+
+@pytest.mark.parametrize(
+    ("texts", "problem"),
+    [
+        (["-2EV", "1", "4"], "'1' beside '-2EV'"),  # mixed units: the bare ones are a guess
+        (["-2EV", "xEV"], "not an exposure step: 'xEV'"),
+        (["EV"], "not an exposure step"),
+        (["1/0EV"], "not an exposure step"),
+        (["100EV"], "not an exposure step"),  # 2^100: no camera's step
+    ],
+)
+def test_a_bad_list_in_ev_says_why(texts, problem):
+    from hdrio.io.exposure import explicit_exposures
+
+    with pytest.raises(ValueError, match=problem.replace("(", r"\(")):
+        explicit_exposures(texts)
+
+
+def test_a_list_in_ev_splits_as_typed():
+    from hdrio.io.exposure import split_exposures
+
+    assert split_exposures("-2 EV, 0 EV, +2 EV") == ["-2 EV", "0 EV", "+2 EV"]
+    assert split_exposures("-2EV 0EV +2EV") == ["-2EV", "0EV", "+2EV"]
+
+
 # -------------------------------------------------------------------- exposure_from_filename
 
 

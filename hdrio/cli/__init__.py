@@ -127,7 +127,7 @@ def _run(argv: list[str]) -> int:
         return chain.main(argv)
     parser = build_parser(argv[0])
     try:
-        args, extras = parser.parse_known_args(argv)
+        args, extras = parser.parse_known_args(negative_values(argv))
         if extras:
             raise _subparser(parser, argv[0]).unknown(extras)
     except SystemExit as exit_:  # --help, --version
@@ -141,6 +141,28 @@ def _run(argv: list[str]) -> int:
         message = error.args[0] if isinstance(error, KeyError) and error.args else error
         print(f"hdrio {args.command}: error: {message}", file=sys.stderr)
         return EXIT_USAGE
+
+
+TAKES_NEGATIVE = ("--exposures",)
+"""Options whose value may start with a minus sign (``--exposures -2EV,0,+2EV``)."""
+
+
+def negative_values(argv: list[str]) -> list[str]:
+    """``argv`` with each of :data:`TAKES_NEGATIVE` joined to a following value that starts
+    with a minus sign and a digit (``--exposures=-2EV,...``): argparse would take the
+    value for an option of its own and say the option has no value."""
+    joined: list[str] = []
+    position = 0
+    while position < len(argv):
+        token = argv[position]
+        following = argv[position + 1] if position + 1 < len(argv) else ""
+        if token in TAKES_NEGATIVE and following[:1] == "-" and following[1:2].isdigit():
+            joined.append(f"{token}={following}")
+            position += 2
+            continue
+        joined.append(token)
+        position += 1
+    return joined
 
 
 def _subparser(parser: argparse.ArgumentParser, command: str) -> Parser:

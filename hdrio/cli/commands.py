@@ -19,6 +19,7 @@ from hdrio.cli.outputs import EXR_SUFFIXES, PREVIEW_SUFFIXES, lossy_note, make_p
 from hdrio.cli.progress import Progress
 from hdrio.cms.checks import CheckReport, StreamingCheck, format_report
 from hdrio.errors import HdrioError
+from hdrio.io.exposure import EV_STEPS
 from hdrio.io.orientation import turned_text
 from hdrio.io.write import EXR_COMPRESSIONS, exr_compression
 from hdrio.job.options import MergeOptions
@@ -194,7 +195,8 @@ def summary(result: MergeResult, output: Path, preview: Path | None, tonemap: st
     full, robust = report.dynamic_range_stops, report.robust_range_stops
     params = result.response.parameters
     inferred = result.exposures.line() if result.exposures is not None else ""
-    relative = inferred and result.exposures.exif is None
+    relative = (inferred and result.exposures.exif is None) or (
+        stack.exposure_sources[0] == EV_STEPS)
     span = (f"relative exposures {stack.exposures[0]:.4g} .. {stack.exposures[-1]:.4g}"
             if relative else f"{_seconds(stack.exposures[0])} .. {_seconds(stack.exposures[-1])}")
     upright = turned_text(stack.files, stack.metadata)

@@ -128,12 +128,13 @@ _EXPOSURE = "exposures"
 MERGE_OPTIONS: tuple[Option, ...] = (
     Option("--exposures", ("LIST",), "exposures", exposure_list, example=("1/8,1,8",),
            group=_EXPOSURE, help="exposure times in seconds, in image order, separated by "
-                                 "commas (1/8,1,8) or spaces ('1/8 1 8'); wins over every "
-                                 "other source"),
+                                 "commas (1/8,1,8) or spaces ('1/8 1 8'), or every one as a "
+                                 "step in EV (-3EV,0EV,+3EV: relative exposures, 0 EV's 1); "
+                                 "wins over every other source"),
     Option("--exposures-from", ("FILE",), "exposures_from", text, group=_EXPOSURE,
            example=("exposures.csv",),
-           help="exposures from a sidecar list: CSV (file,exposure_time_s) or OpenCV "
-                "list.txt"),
+           help="exposures from a sidecar list: CSV (file,exposure_time_s; or filename,"
+                "shutter and the like; commas, semicolons or tabs) or OpenCV list.txt"),
     Option("--exposures-from-data", (), "exposures_from_data", flag, example=(),
            group=_EXPOSURE,
            help="merge with each bracket's exposure estimated from the overlap of "

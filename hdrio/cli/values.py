@@ -85,11 +85,10 @@ def choice(*choices: str) -> Callable[[list[str]], str]:
 
 
 def exposure_list(values: list[str]) -> tuple[str, ...]:
-    from hdrio.io.exposure import parse_exposure, split_exposures
+    from hdrio.io.exposure import explicit_exposures, split_exposures
 
     times = tuple(split_exposures(values[0]))
-    for text in times:
-        parse_exposure(text)  # a typo fails here, before any image is read
+    explicit_exposures(times)  # a typo fails here, before any image is read
     return times
 
 

@@ -13,9 +13,13 @@ import numpy as np
 
 from hdrio.errors import InputError, library_message
 from hdrio.io.exposure import (
+    EV_STEPS,
+    explicit_exposures,
     exposure_from_exif,
     exposure_from_filename,
+    is_ev,
     lookup_in_table,
+    parse_ev,
     parse_exposure,
     read_exposure_table,
     relative_exif_exposures,
@@ -413,13 +417,17 @@ def _resolve_exposures(
             raise InputError(
                 at_fault, f"{len(explicit)} exposures given for {len(paths)} images"
             )
-        values = []
-        for path, text in zip(paths, explicit):
+        for path, text in zip(paths, explicit):  # the item at fault names its file
             try:
-                values.append(parse_exposure(text))
+                parse_ev(text) if is_ev(text) else parse_exposure(text)
             except ValueError as error:
                 raise InputError(path, str(error)) from None
-        return values, "explicit"
+        try:
+            values, in_ev = explicit_exposures(explicit)
+        except ValueError as error:
+            raise InputError(paths[0], f"the exposures given by --exposures: {error}"
+                             ) from None
+        return values, EV_STEPS if in_ev else "explicit"
     if sidecar is not None:
         table = read_exposure_table(sidecar)
         values = []

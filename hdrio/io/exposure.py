@@ -33,21 +33,64 @@ from hdrio.errors import InputError
 _INTEGER = re.compile(r"\d+")
 _SECONDS = re.compile(r"\s*(s|\")$")
 """A unit after a time: ``1/8 s``, ``1/8s``, or a camera's seconds mark, ``8"``."""
+_EV = re.compile(r"\s*ev$", re.IGNORECASE)
+"""The unit of an exposure step: ``-2EV``, ``+2 ev``."""
+
+EV_STEPS = "EV steps"
+"""The exposure source of a list given in EV (:func:`explicit_exposures`): relative
+exposures, the 0 EV bracket's 1."""
 
 
 def split_exposures(text: str) -> list[str]:
     """Exposure times as typed in one field, separated by commas, spaces or both
     (``1/8,1,8``, ``1/8 1 8``, ``1/8, 1 8``); a unit standing alone belongs to the time
-    before it (``1/8 s, 1 s, 8 s``). Both front ends read a list so: ``hdrio merge
-    --exposures`` and Blender's Exposures. A trailing comma leaves an empty item, which
-    :func:`parse_exposure` refuses."""
+    before it (``1/8 s, 1 s, 8 s``; ``-2 EV, 0 EV``). Both front ends read a list so:
+    ``hdrio merge --exposures`` and Blender's Exposures. A trailing comma leaves an empty
+    item, which :func:`parse_exposure` refuses."""
     times: list[str] = []
     for token in re.split(r"[\s,]+", text.strip()):
-        if times and _SECONDS.fullmatch(token):
+        if times and (_SECONDS.fullmatch(token) or _EV.fullmatch(token)):
             times[-1] += f" {token}"
         else:
             times.append(token)
     return times
+
+
+def is_ev(text: str | float) -> bool:
+    """Whether ``text`` is an exposure step in EV (``-2EV``, ``+1/3 ev``)."""
+    return isinstance(text, str) and _EV.search(text.strip()) is not None
+
+
+def parse_ev(text: str) -> float:
+    """``2^EV`` of ``-2EV``, ``+1/3 EV``, ``0.7ev``: the exposure relative to 0 EV's."""
+    number = _EV.sub("", text.strip()).strip()
+    try:
+        parts = number.split("/")
+        if len(parts) > 2:
+            raise ValueError
+        steps = Fraction(parts[0].strip()) / Fraction(parts[1].strip()) if len(parts) == 2 \
+            else Fraction(number)
+        if abs(steps) > 64:
+            raise ValueError
+    except (ValueError, ZeroDivisionError):
+        raise ValueError(f"not an exposure step: {text!r} (e.g. -2EV, +1/3EV)") from None
+    return 2.0 ** float(steps)
+
+
+def explicit_exposures(texts: Sequence[str | float]) -> tuple[list[float], bool]:
+    """``(exposures, in_ev)`` of a typed list: times in seconds (:func:`parse_exposure`),
+    or, when every item is in EV (:func:`parse_ev`), the exposures relative to 0 EV's
+    (``-2EV,0EV,+2EV`` is 1/4, 1, 4). A list that mixes the two is refused: which unit
+    the bare numbers are in is a guess."""
+    steps = [is_ev(text) for text in texts]
+    if any(steps) and not all(steps):
+        first = next(text for text, ev in zip(texts, steps) if ev)
+        other = next(text for text, ev in zip(texts, steps) if not ev)
+        raise ValueError(f"{other!r} beside {first!r}: give every exposure in EV, or every "
+                         "one in seconds")
+    if steps and all(steps):
+        return [parse_ev(str(text)) for text in texts], True
+    return [parse_exposure(text) for text in texts], False
 
 
 def parse_exposure(text: str | float) -> float:

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from hdrio.errors import InputError
+from hdrio.io.exposure import EV_STEPS
 from hdrio.io.staging import strided_copy
 from hdrio.parallel import map_on_threads
 from hdrio.radiometry.curve import CameraResponse
@@ -375,7 +376,8 @@ class ExposureCheck:
 
 # Where a stack's exposures were read (hdrio.stack.ExposureStack.exposure_sources).
 _SAID_IN = {"exif": "in the EXIF", "sidecar": "in the exposure list (--exposures-from)",
-            "filename": "in the file name", "explicit": "given by --exposures"}
+            "filename": "in the file name", "explicit": "given by --exposures",
+            EV_STEPS: "given by --exposures (in EV)"}
 
 
 def said_in(source: str) -> str:

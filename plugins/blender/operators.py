@@ -150,9 +150,9 @@ class HDRIO_OT_merge_to_exr(bpy.types.Operator):
         description="EXR to write (default: merged.exr beside the brackets)")
     exposures: StringProperty(  # type: ignore[valid-type]
         name="Exposures",
-        description="Exposure of each selected file in seconds, in the order of the file "
-                    "names, as `hdrio merge --exposures` (e.g. 1/8 1 8); empty: from the "
-                    "files' EXIF or names")
+        description="Exposure of each selected file in seconds, or each one's step in EV, "
+                    "in the order of the file names, as `hdrio merge --exposures` (e.g. "
+                    "1/8 1 8, or -3EV 0EV +3EV); empty: from the files' EXIF or names")
     exposures_from_data: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Exposures From Data", default=False,
         description="Merge with each bracket's exposure estimated from the pixels, as "

@@ -334,6 +334,17 @@ def test_merge_to_exr_reports_bad_input_in_blender_words(write_brackets, tmp_pat
     _, attributes = read_exr(tmp_path / "out.exr")
     assert attributes["hdrio:exposures"] == ("0.25", "1", "4")  # exact short decimals
     assert attributes["hdrio:exposureSource"] == "explicit"
+    # Steps in EV, as `hdrio merge --exposures -2EV,0EV,+2EV`: the same ratios, the same
+    # pixels; units mixed are refused in the panel's words.
+    pixels, _ = read_exr(tmp_path / "out.exr")
+    (tmp_path / "out.exr").unlink()
+    assert bpy.ops.hdrio.merge_to_exr(**arguments, exposures="-2EV 0EV +2EV") == {"FINISHED"}
+    ev_pixels, attributes = read_exr(tmp_path / "out.exr")
+    assert attributes["hdrio:exposureSource"] == "EV steps"
+    assert np.array_equal(ev_pixels, pixels)
+    (tmp_path / "out.exr").unlink()
+    with pytest.raises(RuntimeError, match="typed in Exposures: '1' beside '-2EV'"):
+        bpy.ops.hdrio.merge_to_exr(**arguments, exposures="-2EV 1 +2EV")
 
 
 def test_merge_to_exr_exposures_from_data_is_hdrio_merges(write_brackets, tmp_path):
