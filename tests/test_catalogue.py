@@ -45,6 +45,14 @@ def _long_input(d: Path) -> list[object]:
     return h.merge(d, [*images[:3], d / "in" / ("x" * 300 + ".png")])
 
 
+def _heic(d: Path, name: str) -> Path:
+    """A file as an iPhone writes it: an ISO box of brand 'heic' (no HEIF reader here)."""
+    (d / "in").mkdir(exist_ok=True)
+    path = d / "in" / f"{name}.heic"
+    path.write_bytes(b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic" + bytes(64))
+    return path
+
+
 def _twice(d: Path) -> list[object]:
     images = _rgb(d)
     return h.merge(d, [images[0], *images])
@@ -207,6 +215,8 @@ CASES = [
          "wrote"),
     Case("pattern unexpanded in hdrio info",
          lambda d: _rgb(d) and ["info", d / "in" / "bracket_1_1*.png"], 0, "bracket_1_16.png"),
+    Case("HEIC from a phone", lambda d: h.merge(d, [_heic(d, name) for name in "abc"]), 2,
+         "a.heic: HEIC (HEIF) is not a format hdrio reads: export the brackets as TIFF"),
     Case("pattern matching nothing", lambda d: h.merge(d, [*_rgb(d), d / "in" / "*.tif"]),
          2, "*.tif: no such file, and as a pattern it matches none"),
     Case("symlink loop input", lambda d: h.merge(d, [*_rgb(d), h.symlink_loop(d / "in")]), 2,

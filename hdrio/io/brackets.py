@@ -36,6 +36,10 @@ from hdrio.stack import ExposureStack
 _CODE_TYPES = {"uint8": (np.uint8, 255), "uint16": (np.uint16, 65535)}
 
 
+UNREAD_FORMATS = {".heic": "HEIC (HEIF)", ".heif": "HEIF", ".avif": "AVIF"}
+"""Formats phones write that this OpenImageIO build reads not (no libheif): named, with
+what to export instead."""
+
 _ROWS_PER_READ = 256
 PLACEHOLDERS = "data"
 """The exposure source of brackets read with no metadata (``infer_exposures``): their
@@ -88,7 +92,12 @@ def _open(path: Path, upright: bool = True) -> Iterator[tuple[object, BracketHea
         config.attribute("oiio:UnassociatedAlpha", 1)
         image = oiio.ImageInput.open(str(path), config)
         if image is None:
-            raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
+            message = library_message(oiio.geterror)
+            if path.suffix.lower() in UNREAD_FORMATS:
+                raise InputError(path, f"{UNREAD_FORMATS[path.suffix.lower()]} is not a "
+                                       "format hdrio reads: export the brackets as TIFF "
+                                       "(16-bit), JPEG or PNG, keeping their EXIF")
+            raise InputError(path, f"cannot read image ({message})")
         try:
             spec = image.spec()
             base = str(spec.format)
