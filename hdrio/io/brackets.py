@@ -427,8 +427,9 @@ def _resolve_exposures(
                 at_fault, f"{len(explicit)} exposures given for {len(paths)} images"
             )
         for path, text in zip(paths, explicit):  # the item at fault names its file
+            parse = parse_ev if is_ev(text) else parse_exposure
             try:
-                parse_ev(text) if is_ev(text) else parse_exposure(text)
+                parse(text)
             except ValueError as error:
                 raise InputError(path, str(error)) from None
         try:
