@@ -48,7 +48,11 @@ def name_too_long(path: str | Path) -> str | None:
     return None
 
 
-def check_input(path: str | Path, what: str = "an image file") -> os.stat_result:
+IMAGE = "an image file"
+"""What an input is, unless said otherwise (:func:`check_input`)."""
+
+
+def check_input(path: str | Path, what: str = IMAGE) -> os.stat_result:
     """Check that ``path`` is a readable regular file; its ``stat`` (links followed)."""
     too_long = name_too_long(path)
     if too_long:
@@ -58,8 +62,8 @@ def check_input(path: str | Path, what: str = "an image file") -> os.stat_result
     except OSError as error:
         raise InputError(path, _problem(error)) from None
     if stat.S_ISDIR(info.st_mode):
-        raise InputError(path, f"is a folder, not {what}: name its files "
-                               f"(e.g. '{Path(path) / '*.jpg'}')")
+        hint = f": name its files (e.g. '{Path(path) / '*.jpg'}')" if what == IMAGE else ""
+        raise InputError(path, f"is a folder, not {what}{hint}")
     if not stat.S_ISREG(info.st_mode):
         raise InputError(path, f"is not a regular file (a device or pipe?), not {what}")
     if not os.access(path, os.R_OK):
@@ -89,7 +93,7 @@ def expand_patterns(paths: Iterable[str | Path]) -> list[str | Path]:
     return expanded
 
 
-def check_inputs(paths: Sequence[str | Path], what: str = "an image file") -> list[Path]:
+def check_inputs(paths: Sequence[str | Path], what: str = IMAGE) -> list[Path]:
     """:func:`check_input` each path, and refuse a file given twice (under any name)."""
     seen: dict[tuple[int, int], Path] = {}
     checked = []
