@@ -196,6 +196,15 @@ def test_exposures_typed_in_ev_merge_as_the_seconds_they_stand_for(brackets, out
     assert np.array_equal(exr_rgb(chain), exr_rgb(seconds))
 
 
+def test_an_exposure_in_ev_the_data_contradict_is_named_in_ev(brackets, out_dir, capsys):
+    # The 4 s bracket typed as +1 EV (2 s): the warning speaks the unit it was typed in.
+    code, _, err = run(capsys, "merge", *brackets, "-o", out_dir / "off.exr", "-q",
+                       "--exposures", "-4EV,-2EV,0EV,+1EV")
+    assert code == 0, err
+    assert re.search(r"exposure [+-]?\d+ EV given by --exposures \(in EV\), the data say "
+                     r"[+-]?[\d.]+ EV \([+-][\d.]+ stop\)", err), err
+
+
 def test_exposures_in_ev_and_seconds_mixed_are_refused(brackets, out_dir, capsys):
     assert_rejected(capsys, merge_args(brackets[:3], out_dir, "--exposures", "-2EV,1,2EV"),
                     out_dir, "--exposures -2EV,1,2EV", "'1' beside '-2EV'")

@@ -291,6 +291,7 @@ class ExposureCheck:
         where its exposure came from (``source``: the stack's exposure source, ``exif``,
         ``sidecar``...); none when there was no metadata to be off."""
         said = said_in(source)
+        shown = ev_text if source == EV_STEPS and self.exif is None else exposure_text
         lines: list[str] = []
         if self.inferred and self.exif is None:
             return lines
@@ -299,8 +300,8 @@ class ExposureCheck:
             stops = math.log2(data / meta) if math.isfinite(meta) else 0.0
             if abs(stops) > WARN_STOPS:
                 lines.append(
-                    f"{Path(name).name}: exposure {exposure_text(meta)} {said}, the data "
-                    f"say {exposure_text(data)} ({stops:+.2f} stop); "
+                    f"{Path(name).name}: exposure {shown(meta)} {said}, the data "
+                    f"say {shown(data)} ({stops:+.2f} stop); "
                     + ("used the data's (--exposures-from-data)" if self.used
                        else "--exposures-from-data uses the data's"))
         misfit = self.response_misfit()
@@ -384,6 +385,12 @@ def said_in(source: str) -> str:
     """Where exposures of ``source`` (an exposure source of
     :class:`~hdrio.stack.ExposureStack`) were read, in the words of a warning."""
     return _SAID_IN.get(source, "in the metadata")
+
+
+def ev_text(t: float) -> str:
+    """A relative exposure as the step in EV it was typed as: ``-2 EV``, ``+1.58 EV``."""
+    steps = round(math.log2(t), 2)
+    return f"{steps:+g} EV" if steps else "0 EV"
 
 
 def exposure_text(t: float) -> str:
