@@ -69,4 +69,11 @@ grep -q "merged.jpg: a JPEG image, not OpenEXR" err.txt || fail "check of a JPEG
 head -c 2000 merged.exr > truncated.exr
 expect 2 "$hdrio" check truncated.exr
 grep -q "truncated.exr" err.txt || fail "check of a truncated EXR: $(cat err.txt)"
+# What needs an extra says which, naming the file or option (not an internal error).
+for name in a b c; do printf 'II*\0' > "$name.CR2"; done
+expect 2 "$hdrio" merge a.CR2 b.CR2 c.CR2 -o raw.exr
+grep -q "a.CR2: camera RAW needs rawpy.*pip install 'hdrio\[raw\]'" err.txt \
+    || fail "RAW without rawpy: $(cat err.txt)"
+expect 2 "$hdrio" "$demo"/bracket_*.png --merge --contact-sheet sheet.png
+grep -q "pip install 'hdrio\[plot\]'" err.txt || fail "a picture without matplotlib: $(cat err.txt)"
 echo "plain-install smoke test: every command works without the extras"

@@ -406,3 +406,21 @@ def test_every_subcommand_is_routed_to_its_parser_not_to_the_chain():
 def test_one_bracket_is_counted_in_the_singular(brackets, out_dir, capsys):
     code, _, err = run(capsys, "merge", brackets[0], "-o", out_dir / "one.exr")
     assert code == 2 and "reading 1 bracket\n" in err and "1 brackets" not in err, err
+
+
+def test_camera_raw_without_rawpy_names_the_extra(tmp_path, out_dir, capsys, monkeypatch):
+    # The plain install has no rawpy (the 'raw' extra): RAW brackets are refused naming
+    # the first file and the install that reads them, with exit 2, where an internal
+    # error (ModuleNotFoundError) was reported before. Both front ends, as on that install.
+    monkeypatch.setitem(sys.modules, "rawpy", None)  # import rawpy raises ImportError
+    raws = []
+    for name in ("a.CR2", "b.CR2", "c.CR2"):
+        (tmp_path / name).write_bytes(b"II*\x00" + bytes(64))
+        raws.append(tmp_path / name)
+    for argv in (["merge", *raws, "-o", out_dir / "raw.exr"],
+                 [*raws, "--merge", "-o", out_dir / "raw.exr"]):
+        code, _, err = run(capsys, *argv)
+        assert code == 2, err
+        assert "a.CR2: camera RAW needs rawpy" in err and "pip install 'hdrio[raw]'" in err
+        assert "internal error" not in err
+    assert not list(out_dir.iterdir())

@@ -46,9 +46,19 @@ def is_raw(path: str | Path) -> bool:
     return Path(path).suffix.lower() in RAW_SUFFIXES
 
 
-def _open(path: Path):
-    import rawpy
+def _rawpy(path: Path):
+    """The rawpy module; a file's error where it is not installed (the ``raw`` extra: a
+    plain install leaves LibRaw out)."""
+    try:
+        import rawpy
+    except ImportError:
+        raise InputError(path, "camera RAW needs rawpy (LibRaw), which a plain install "
+                               "leaves out: pip install 'hdrio[raw]'") from None
+    return rawpy
 
+
+def _open(path: Path):
+    rawpy = _rawpy(path)
     if not path.is_file():
         raise InputError(path, "no such file")
     try:
@@ -111,10 +121,10 @@ def read_raw(path: str | Path, white_balance: Sequence[float] | None = None
     balance, through the camera matrix, scaled to 16 bits. Saturated pixels are
     ``65535`` in every channel.
     """
-    import rawpy
     import scipy.ndimage
 
     path = Path(path)
+    rawpy = _rawpy(path)
     wb = list(white_balance) if white_balance is not None else list(as_shot_white_balance(path))
     if len(wb) == 3:
         wb.append(wb[1])
