@@ -14,10 +14,9 @@ import numpy as np
 from hdrio.errors import InputError, library_message
 from hdrio.io.exposure import (
     EV_STEPS,
-    explicit_exposures,
     exposure_from_exif,
     exposure_from_filename,
-    is_ev,
+    in_ev,
     lookup_in_table,
     parse_ev,
     parse_exposure,
@@ -426,18 +425,19 @@ def _resolve_exposures(
             raise InputError(
                 at_fault, f"{len(explicit)} exposures given for {len(paths)} images"
             )
-        for path, text in zip(paths, explicit):  # the item at fault names its file
-            parse = parse_ev if is_ev(text) else parse_exposure
-            try:
-                parse(text)
-            except ValueError as error:
-                raise InputError(path, str(error)) from None
         try:
-            values, in_ev = explicit_exposures(explicit)
+            ev = in_ev(explicit)
         except ValueError as error:
             raise InputError(paths[0], f"the exposures given by --exposures: {error}"
                              ) from None
-        return values, EV_STEPS if in_ev else "explicit"
+        parse = parse_ev if ev else parse_exposure
+        values = []
+        for path, text in zip(paths, explicit):  # the item at fault names its file
+            try:
+                values.append(parse(text))
+            except ValueError as error:
+                raise InputError(path, str(error)) from None
+        return values, EV_STEPS if ev else "explicit"
     if sidecar is not None:
         table = read_exposure_table(sidecar)
         values = []

@@ -82,15 +82,20 @@ def explicit_exposures(texts: Sequence[str | float]) -> tuple[list[float], bool]
     or, when every item is in EV (:func:`parse_ev`), the exposures relative to 0 EV's
     (``-2EV,0EV,+2EV`` is 1/4, 1, 4). A list that mixes the two is refused: which unit
     the bare numbers are in is a guess."""
+    ev = in_ev(texts)
+    return [parse_ev(str(text)) if ev else parse_exposure(text) for text in texts], ev
+
+
+def in_ev(texts: Sequence[str | float]) -> bool:
+    """Whether a typed list is in EV (every item, :func:`is_ev`) rather than in seconds
+    (none); a ``ValueError`` naming two items where it mixes the two."""
     steps = [is_ev(text) for text in texts]
     if any(steps) and not all(steps):
         first = next(text for text, ev in zip(texts, steps) if ev)
         other = next(text for text, ev in zip(texts, steps) if not ev)
         raise ValueError(f"{other!r} beside {first!r}: give every exposure in EV, or every "
                          "one in seconds")
-    if steps and all(steps):
-        return [parse_ev(str(text)) for text in texts], True
-    return [parse_exposure(text) for text in texts], False
+    return bool(steps) and all(steps)
 
 
 def parse_exposure(text: str | float) -> float:
@@ -184,7 +189,7 @@ def _fields(header: str, delimiter: str) -> list[str]:
             for name in next(csv.reader([header], delimiter=delimiter))]
 
 
-def _read_csv_table(path: Path, lines: Sequence[tuple[int, str]], delimiter: str = ","
+def _read_csv_table(path: Path, lines: Sequence[tuple[int, str]], delimiter: str
                     ) -> dict[str, float]:
     header, *rows = lines
     fields = _fields(header[1], delimiter)
