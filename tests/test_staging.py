@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from hdrio.io.brackets import read_brackets
-from hdrio.io.staging import codes_buffer, is_staged, release
+import pytest
+
+from hdrio.io.staging import codes_buffer, is_staged, release, write_rows
 from hdrio.merge.weighted_mean import merge_brackets
 from hdrio.response import response_Debevec1997
 from hdrio.stack import ExposureStack
@@ -26,6 +28,24 @@ def test_released_pages_keep_their_values():
     release(staged, None, 7, 33)
     release(staged[1:], 0, 3, 5)  # a view: offsets relative to the view
     np.testing.assert_array_equal(staged, values)
+
+
+def test_rows_written_through_the_file_are_what_the_mapping_reads():
+    # 5 brackets of 30 rows x 6 KB: a band of 20 rows is 120 KB, more than one write.
+    staged = codes_buffer((5, 30, 2048, 3), np.uint8, budget=0)
+    staged[:] = 7
+    rows = np.random.default_rng(1).integers(0, 256, (20, 2048, 3), dtype=np.uint8)
+    assert write_rows(staged[3], 9, rows)
+    assert write_rows(staged[1:][0], 0, rows[:5])  # a view: rows of bracket 1
+    expected = np.full(staged.shape, 7, np.uint8)
+    expected[3, 9:29] = rows
+    expected[1, :5] = rows[:5]
+    np.testing.assert_array_equal(staged, expected)
+    with pytest.raises(ValueError, match="do not fit"):
+        write_rows(staged[0], 25, rows)  # 20 rows from row 25 of 30
+    in_memory = np.zeros((2, 30, 2048, 3), np.uint8)
+    assert not write_rows(in_memory[0], 0, rows)  # the caller writes it
+    assert not in_memory.any()
 
 
 def test_staged_read_and_merge_match_in_memory(write_brackets, monkeypatch):

@@ -27,7 +27,7 @@ from hdrio.io.native import quiet_native_stderr, size_thread_pools
 from hdrio.io.orientation import UPRIGHT, orientation_of, place, upright_size
 from hdrio.io.paths import check_input, check_inputs
 from hdrio.io.raw import is_raw, raw_exif, read_raw_set
-from hdrio.io.staging import codes_buffer, release
+from hdrio.io.staging import codes_buffer, release, write_rows
 from hdrio.parallel import threads
 from hdrio.skips import classify_range, code_range
 from hdrio.stack import ExposureStack
@@ -164,7 +164,8 @@ def _decode_into(image, header: BracketHeader, out: np.ndarray,
             raise InputError(header.path, "cannot decode image "
                              f"({library_message(image.geterror) or 'read failed'})")
         band = np.asarray(rows).reshape(bottom - top, width, header.channels)
-        place(band, out, top, header.orientation)
+        if header.orientation != UPRIGHT or not write_rows(out, top, band):
+            place(band, out, top, header.orientation)
         band_low, band_high = code_range(band)
         low = band_low if low is None else min(low, band_low)
         high = band_high if high is None else max(high, band_high)

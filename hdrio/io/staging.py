@@ -18,10 +18,17 @@ import math
 import mmap
 import os
 import tempfile
+import weakref
 
 import numpy as np
 
 DEFAULT_BUDGET_MB = 256
+
+_WRITE_BYTES = 2**16
+"""Bytes a staged write hands the file at once. The page cache holds what one write
+brings in a folio of up to that size, and a read through the mapping maps a whole folio:
+written in 2.6 MB bands, the deghosting test's sparse reads mapped all 504 MB of a
+7 x 24 MP stack at once (its band-by-band release notwithstanding)."""
 
 CANDIDATE_LIMIT = 2**14
 """Pixels of the regular grid the response's sampler and the noise fit read (at most)."""
@@ -51,6 +58,9 @@ def codes_buffer(shape: tuple[int, ...], dtype, budget: int | None = None) -> np
         staged = np.memmap(backing, dtype=dtype, mode="r+", shape=shape)
         if hasattr(mmap, "MADV_RANDOM"):  # a sparse read maps its pages, not their folios
             staged._mmap.madvise(mmap.MADV_RANDOM)
+        # A descriptor of its own for write_rows, closed with the array.
+        staged.hdrio_descriptor = os.dup(backing.fileno())
+        weakref.finalize(staged, os.close, staged.hdrio_descriptor)
         return staged
 
 
@@ -82,11 +92,42 @@ def release(codes: np.ndarray, bracket: int | None = None, top: int = 0,
             codes._mmap.madvise(mmap.MADV_DONTNEED, first, last - first)
 
 
-def _mapping_address(codes: np.memmap) -> int:
-    """Address of the first byte of the mapping ``codes`` is a view of."""
+def write_rows(codes: np.ndarray, top: int, rows: np.ndarray) -> bool:
+    """Write ``rows`` (``(n, W, C)``, contiguous) over rows ``top .. top + n`` of one
+    bracket ``codes`` ``(H, W, C)`` of a staged array through its file (``pwrite``), not
+    its mapping; False (nothing written) for an in-memory array.
+
+    Written through the mapping, every 4 KB page faulted on its own: the file's hole read
+    and zeroed, the page made writable, its block reserved, then handed back. A 7 x 24
+    MP JPEG stack decoded on 2 threads spent 0.6 s of system CPU that way, 0.2 s written
+    through the file (the mapping sees the same page cache)."""
+    root = _root(codes)
+    descriptor = getattr(root, "hdrio_descriptor", None)
+    if descriptor is None or not is_staged(codes) or not hasattr(os, "pwrite"):
+        return False  # in memory (or no pwrite, as on Windows: written through the mapping)
+    target = codes[top:top + rows.shape[0]]
+    if not (target.flags.c_contiguous and rows.flags.c_contiguous
+            and rows.dtype == codes.dtype and rows.shape == target.shape):
+        raise ValueError(f"rows {rows.shape} {rows.dtype} do not fit {target.shape}")
+    data = memoryview(rows).cast("B")
+    position = target.ctypes.data - _mapping_address(codes)
+    while data:  # in pieces, so that the page cache keeps small folios (see above)
+        written = os.pwrite(descriptor, data[:_WRITE_BYTES], position)
+        data, position = data[written:], position + written
+    return True
+
+
+def _root(codes: np.ndarray) -> np.ndarray:
+    """The array ``codes`` is a view of (itself when it owns its memory)."""
     base = codes
     while isinstance(base.base, np.ndarray):
         base = base.base
+    return base
+
+
+def _mapping_address(codes: np.memmap) -> int:
+    """Address of the first byte of the mapping ``codes`` is a view of."""
+    base = _root(codes)
     return base.ctypes.data - int(getattr(base, "offset", 0))
 
 
