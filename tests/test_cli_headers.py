@@ -66,6 +66,30 @@ def test_chain_keeps_alpha_and_source_metadata(foreign_rgba, tmp_path, capsys):
     assert header["hdrio:exposureScale"] == 2.0
 
 
+def test_preview_of_premultiplied_rgba_shows_light_where_alpha_is_0(tmp_path, capsys):
+    # OpenEXR's colour is premultiplied: alpha 0 with light is a glow that covers
+    # nothing (CandleGlass's flame and the inside of its glass); alpha 0 and no light is
+    # hdrio's own "masked in every bracket", shown black and left out of the key.
+    rng = np.random.default_rng(3)
+    pixels = np.concatenate([rng.uniform(0.05, 0.5, (6, 8, 3)), np.ones((6, 8, 1))], axis=-1)
+    pixels[0, :4] = (8.0, 4.0, 1.0, 0.0)  # a flame: alpha 0, the brightest light
+    pixels[5, 4:] = 0.0  # masked: no light, alpha 0
+    path = tmp_path / "flame.exr"
+    output = oiio.ImageOutput.create(str(path))
+    output.open(str(path), oiio.ImageSpec(8, 6, 4, "half"))
+    output.write_image(pixels.astype(np.float16))
+    output.close()
+    preview = tmp_path / "flame.png"
+    code, _, err = run(capsys, path, "--tonemap", "reinhard-global", "-o", preview)
+    assert code == 0, err
+    shown = oiio.ImageBuf(str(preview)).get_pixels(oiio.FLOAT)
+    assert shown.shape == (6, 8, 3)
+    # The flame is the brightest thing shown (was black), the masked pixels black.
+    assert shown[0, :4].mean(axis=-1).min() > shown[1:5].mean(axis=-1).max()
+    assert shown[0, :4, 0].min() > 0.9
+    assert not shown[5, 4:].any()
+
+
 def test_tone_mapped_exr_is_labelled_display_referred(brackets, tmp_path, capsys):
     out = tmp_path / "display.exr"
     code, _, err = run(capsys, *brackets, "--colorspace", "ACEScg", "--merge",

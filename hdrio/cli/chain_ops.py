@@ -137,10 +137,19 @@ def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
                                     chain.settings.get("ocio_config")) or DEFAULT_SPACE
     except HdrioError:  # a space the config does not know: luminance as Rec.709
         space = DEFAULT_SPACE
-    unseen = None if image.alpha is None else image.alpha[..., 0] == 0  # masked: black
+    unseen = None if image.alpha is None else _unseen_pixels(image.pixels, image.alpha)
     image.pixels = render_preview(image.pixels, name, space, unseen, **parameters)
     image.attributes = display_attributes(image.attributes, f"{name} (sRGB)")
     image.display, image.statistics = True, None
+
+
+def _unseen_pixels(pixels: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """``(H, W)``: the pixels a preview shows black and leaves out of the key, those
+    with no light and alpha 0: hdrio's merge writes them where every bracket was masked
+    out. An EXR's colour is premultiplied by its alpha, so alpha 0 with some light is
+    light that covers nothing (a flame, a glow, a reflection in glass) and is shown as
+    any other pixel (as OpenImageIO's premultiplication keeps it)."""
+    return (alpha[..., 0] == 0) & ~np.any(pixels, axis=-1)
 
 
 def _size(values: list[str]) -> str:
