@@ -90,6 +90,32 @@ def test_preview_of_premultiplied_rgba_shows_light_where_alpha_is_0(tmp_path, ca
     assert not shown[5, 4:].any()
 
 
+def test_preview_of_a_masked_merge_is_the_same_from_the_chain(write_brackets, tmp_path,
+                                                              capsys):
+    # Masked in every bracket (--exclude-color): alpha 0 and no light in the EXR, black
+    # in the preview and out of its key, whether the merge renders it or the chain does
+    # from the EXR.
+    paths = write_brackets(size=(48, 64))
+    for path in paths:
+        buffer = oiio.ImageBuf(str(path))
+        codes = buffer.get_pixels(oiio.UINT8)
+        codes[10:30, 20:40] = (0, 0, 255)
+        buffer.set_pixels(oiio.ROI(), codes)
+        assert buffer.write(str(path))
+    exr, merged, chained = (tmp_path / name for name in ("m.exr", "m.png", "chain.png"))
+    code, _, err = run(capsys, "merge", *paths, "--exclude-color", "0,0,255", "-o", exr,
+                       "--preview", merged, "-q")
+    assert code == 0, err
+    assert not _channels(exr)["A"][10:30, 20:40].any()
+    code, _, err = run(capsys, exr, "--tonemap", "reinhard-global", "-o", chained)
+    assert code == 0, err
+    from_merge = oiio.ImageBuf(str(merged)).get_pixels(oiio.UINT8).astype(int)
+    from_chain = oiio.ImageBuf(str(chained)).get_pixels(oiio.UINT8).astype(int)
+    assert not from_chain[10:30, 20:40].any()
+    # One code: the chain reads the radiance back from half floats (3 decimal digits).
+    assert np.abs(from_chain - from_merge).max() <= 1
+
+
 def test_tone_mapped_exr_is_labelled_display_referred(brackets, tmp_path, capsys):
     out = tmp_path / "display.exr"
     code, _, err = run(capsys, *brackets, "--colorspace", "ACEScg", "--merge",

@@ -146,10 +146,13 @@ def _tonemap(chain: Chain, value: tuple[str, dict[str, float]]) -> None:
 def _unseen_pixels(pixels: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """``(H, W)``: the pixels a preview shows black and leaves out of the key, those
     with no light and alpha 0: hdrio's merge writes them where every bracket was masked
-    out. An EXR's colour is premultiplied by its alpha, so alpha 0 with some light is
-    light that covers nothing (a flame, a glow, a reflection in glass) and is shown as
-    any other pixel (as OpenImageIO's premultiplication keeps it)."""
-    return (alpha[..., 0] == 0) & ~np.any(pixels, axis=-1)
+    out (colour at half's smallest positive value, :func:`hdrio.io.write.write_exr`). An
+    EXR's colour is premultiplied by its alpha, so alpha 0 with some light is light that
+    covers nothing (a flame, a glow, a reflection in glass) and is shown as any other
+    pixel (as OpenImageIO's premultiplication keeps it)."""
+    from hdrio.io.write import HALF_MIN_POSITIVE
+
+    return (alpha[..., 0] == 0) & np.all(pixels <= HALF_MIN_POSITIVE, axis=-1)
 
 
 def _size(values: list[str]) -> str:
