@@ -66,6 +66,20 @@ def test_chain_keeps_alpha_and_source_metadata(foreign_rgba, tmp_path, capsys):
     assert header["hdrio:exposureScale"] == 2.0
 
 
+def test_chain_writes_no_capture_time_an_input_did_not_have(tmp_path, capsys):
+    # OpenImageIO stamps the time of writing as capDate where none is given: a Radiance
+    # HDR (or an EXR without capDate) copied by the chain would claim to be captured now.
+    source = tmp_path / "plain.hdr"
+    output = oiio.ImageOutput.create(str(source))
+    output.open(str(source), oiio.ImageSpec(8, 6, 3, "float"))
+    output.write_image(np.full((6, 8, 3), 0.25, np.float32))
+    output.close()
+    out = tmp_path / "plain.exr"
+    code, _, err = run(capsys, source, "--exposure", "1", "-o", out)
+    assert code == 0, err
+    assert "capDate" not in _header(out)
+
+
 def test_preview_of_premultiplied_rgba_shows_light_where_alpha_is_0(tmp_path, capsys):
     # OpenEXR's colour is premultiplied: alpha 0 with light is a glow that covers
     # nothing (CandleGlass's flame and the inside of its glass); alpha 0 and no light is

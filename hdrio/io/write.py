@@ -310,7 +310,9 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
             observe(rows[..., :own])
         return rows
 
-    attributes = {"compression": compression, **(attributes or {})}
+    # No capture time known is none written: OpenImageIO stamps the time of writing as
+    # capDate (the capture's date, to OpenEXR) where DateTime is absent.
+    attributes = {"compression": compression, "DateTime": "", **(attributes or {})}
     if not layers:
         return write_image(path, rgb, pixel_type, attributes, band)
     return write_image(path, _WithLayers(rgb, planes[1:]), pixel_type, attributes, band,
