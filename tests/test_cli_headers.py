@@ -66,6 +66,25 @@ def test_chain_keeps_alpha_and_source_metadata(foreign_rgba, tmp_path, capsys):
     assert header["hdrio:exposureScale"] == 2.0
 
 
+def test_chain_keeps_an_inputs_zeros_and_negative_values(tmp_path, capsys):
+    # Another program's scene-linear pixels (Desk.exr has 10,794 negative values): a
+    # copy through the chain keeps them, as half floats hold them (they were clamped to
+    # half's smallest positive value, the floor of a merge's radiance).
+    values = np.array([-0.011917, -1.5, 0.0, 0.25, 3.0, -2.0**-20], np.float16)
+    pixels = np.resize(values, (4, 6, 3)).astype(np.float16)
+    source = tmp_path / "signed.exr"
+    output = oiio.ImageOutput.create(str(source))
+    output.open(str(source), oiio.ImageSpec(6, 4, 3, "half"))
+    output.write_image(pixels)
+    output.close()
+    copy, brighter = tmp_path / "copy.exr", tmp_path / "brighter.exr"
+    code, _, err = run(capsys, source, "-o", copy, "--exposure", "1", "-o", brighter)
+    assert code == 0, err
+    for name, c in zip("RGB", range(3)):  # x1 and x2 are exact in half floats
+        np.testing.assert_array_equal(_channels(copy)[name], pixels[..., c])
+        np.testing.assert_array_equal(_channels(brighter)[name], 2 * pixels[..., c])
+
+
 def test_chain_writes_no_capture_time_an_input_did_not_have(tmp_path, capsys):
     # OpenImageIO stamps the time of writing as capDate where none is given: a Radiance
     # HDR (or an EXR without capDate) copied by the chain would claim to be captured now.

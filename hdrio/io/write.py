@@ -264,13 +264,16 @@ def exr_compression(text: str) -> str:
 def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object] | None = None,
               pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
               layers: Mapping[str, np.ndarray] | None = None,
-              observe: Callable[[np.ndarray], None] | None = None) -> Path:
+              observe: Callable[[np.ndarray], None] | None = None,
+              positive: bool = True) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
-    range (so no pixel becomes 0 or Inf); callers keep radiance inside it (see
-    :func:`hdrio.job.output.half_safe_scale`). ``observe(rows)``, when given, sees the
+    range (so no pixel of a merge's radiance becomes 0 or Inf); callers keep radiance
+    inside it (see :func:`hdrio.job.output.half_safe_scale`). ``positive`` false keeps
+    zeros and negative values (another program's image, a tone-mapped one) as they are,
+    clamped to +-65504 only. ``observe(rows)``, when given, sees the
     image's own channels exactly as stored, piece by piece (a half image's as
     ``float16``), possibly from several threads at once.
 
@@ -293,8 +296,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     # everywhere: hdrio.merge.exclusion), the layers unscaled and kept finite.
     count = len(names)
     scales = [float(factor)] * own + [1.0] * (count - own)
-    lows = [HALF_MIN_POSITIVE] * min(own, 3) + [0.0] * (own - min(own, 3)) + [
-        -HALF_MAX] * (count - own)
+    lows = [HALF_MIN_POSITIVE if positive else -HALF_MAX] * min(own, 3) + [0.0] * (
+        own - min(own, 3)) + [-HALF_MAX] * (count - own)
     highs = [HALF_MAX] * count
 
     def band(rows: np.ndarray) -> np.ndarray:
