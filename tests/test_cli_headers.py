@@ -85,6 +85,66 @@ def test_chain_keeps_an_inputs_zeros_and_negative_values(tmp_path, capsys):
         np.testing.assert_array_equal(_channels(brighter)[name], 2 * pixels[..., c])
 
 
+def _write_channels(path: Path, names: tuple[str, ...], pixels: np.ndarray) -> None:
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], len(names), "half")
+    spec.channelnames = names
+    output = oiio.ImageOutput.create(str(path))
+    output.open(str(path), spec)
+    output.write_image(pixels.astype(np.float16))
+    output.close()
+
+
+def test_chain_carries_an_inputs_other_channels(tmp_path, capsys):
+    # A renderer's EXR: colour, alpha and other channels (depth, normals, a mask). The
+    # chain's operations act on the colour; the rest is carried along, resized with the
+    # image, and written back under its own names (it was dropped without a word).
+    names = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "motion.Y")
+    pixels = np.random.default_rng(4).uniform(0.0, 4.0, (6, 8, len(names)))
+    pixels[..., 3] = 1.0
+    source = tmp_path / "aovs.exr"
+    _write_channels(source, names, pixels)
+    brighter, small = tmp_path / "brighter.exr", tmp_path / "small.exr"
+    code, _, err = run(capsys, source, "--exposure", "1", "-o", brighter, "--resize", "50%",
+                       "-o", small)
+    assert code == 0, err
+    before, after, resized = _channels(source), _channels(brighter), _channels(small)
+    assert sorted(after) == sorted(resized) == sorted(names)
+    for name in names:  # x2 is exact in half floats
+        expected = 2 * before[name] if name in "RGB" else before[name]
+        np.testing.assert_array_equal(after[name], expected, err_msg=name)
+        assert resized[name].shape == (3, 4)
+    # Each channel resized as the colour is (the same filter, applied alone).
+    from hdrio.tools.imageops import resize
+
+    for name in ("Z", "motion.Y"):
+        np.testing.assert_allclose(resized[name], resize(before[name][..., None], 4, 3)[..., 0],
+                                   rtol=1e-3)  # half's precision
+
+
+def test_chain_resizes_the_merges_layers_with_it(brackets, tmp_path, capsys):
+    # The uncertainty and motion layers went missing from a resized merge.
+    out = tmp_path / "small.exr"
+    code, _, err = run(capsys, *brackets, "--uncertainty", "--motion-layer", "--merge",
+                       "--resize", "50%", "-o", out)
+    assert code == 0, err
+    channels = _channels(out)
+    assert {"uncertainty.R", "uncertainty.G", "uncertainty.B", "motion.Y"} <= set(channels)
+    assert channels["uncertainty.R"].shape == channels["R"].shape == (24, 32)
+
+
+def test_chain_writes_a_grey_exr_with_alpha(tmp_path, capsys):
+    # Y and A: an internal error before (the writer named two channels none).
+    pixels = np.stack([np.linspace(0.1, 3.0, 48).reshape(6, 8), np.ones((6, 8))], axis=-1)
+    source, out = tmp_path / "grey.exr", tmp_path / "out.exr"
+    _write_channels(source, ("Y", "A"), pixels)
+    code, _, err = run(capsys, source, "--exposure", "1", "-o", out)
+    assert code == 0, err
+    channels = _channels(out)
+    assert list(channels) == ["Y", "A"]
+    np.testing.assert_array_equal(channels["Y"], 2 * _channels(source)["Y"])
+    np.testing.assert_array_equal(channels["A"], 1.0)
+
+
 def test_chain_writes_no_capture_time_an_input_did_not_have(tmp_path, capsys):
     # OpenImageIO stamps the time of writing as capDate where none is given: a Radiance
     # HDR (or an EXR without capDate) copied by the chain would claim to be captured now.

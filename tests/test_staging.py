@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-
-from hdrio.io.brackets import read_brackets
 import pytest
 
+from hdrio.io.brackets import read_brackets
 from hdrio.io.staging import codes_buffer, is_staged, release, write_rows
 from hdrio.merge.weighted_mean import merge_brackets
 from hdrio.response import response_Debevec1997

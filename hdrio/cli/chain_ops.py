@@ -81,12 +81,13 @@ def read_input(chain: Chain, path: Path) -> None:
         chain.brackets.extend(files)
         return
     from hdrio.io.header import read_typed_attributes
-    from hdrio.io.images import read_image
+    from hdrio.io.images import read_image, read_other_channels
 
     pixels, alpha = read_image(path, say=chain.note, alpha=True)
     attributes = {name: value for name, value in read_typed_attributes(path).items()
                   if not name.startswith(_LAYOUT_PREFIXES)}
-    image = Image(pixels, attributes, str(path), alpha=alpha)
+    image = Image(pixels, attributes, str(path), alpha=alpha,
+                  channels=read_other_channels(path))
     image.display = image.attribute("hdrio:units") == "display-referred"
     image.scale = float(image.attribute("hdrio:exposureScale", 1.0))  # type: ignore[arg-type]
     chain.images.append(image)
@@ -182,4 +183,7 @@ def _resize(chain: Chain, size: str) -> None:
     image.pixels = resize(image.pixels, *size_)
     if image.alpha is not None:
         image.alpha = resize(image.alpha, *size_)
+    for planes in (image.layers, image.channels):  # masks become fractional, as alpha
+        planes.update((name, resize(plane.reshape(*plane.shape[:2], -1), *size_))
+                      for name, plane in planes.items())
     image.statistics = None

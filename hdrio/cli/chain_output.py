@@ -124,15 +124,15 @@ def _output(chain: Chain, text: str) -> None:
         pixels = image.pixels if image.alpha is None else np.concatenate(
             [image.pixels, image.alpha], axis=-1)
         write_exr(path, pixels, with_relative_sources(image.attributes, path),
-                  pixel_type=data_type, compression=compression, positive=False)
+                  pixel_type=data_type, compression=compression, positive=False,
+                  channels=image.channels)
     else:
         report = merge_report(image)
-        layers = {name: layer for name, layer in image.layers.items()
-                  if layer.shape[:2] == image.pixels.shape[:2]}
         write_radiance(path, image.pixels, image.attributes, pixel_type=data_type,
                        compression=compression, scale=image.scale, alpha=image.alpha,
-                       observe=None if report is None else report.add, layers=layers,
-                       positive=image.statistics is not None)  # a merge's own radiance
+                       observe=None if report is None else report.add, layers=image.layers,
+                       positive=image.statistics is not None,  # a merge's own radiance
+                       channels=image.channels)
     chain.progress.step(f"wrote {path}")
     chain.say(f"wrote {path}")
     if report is not None and chain.settings.get("report"):

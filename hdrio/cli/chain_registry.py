@@ -110,7 +110,9 @@ class Image:
     statistics: Any = None  # the merge's MergeResult while the pixels are still its own
     alpha: np.ndarray | None = None  # (H, W, 1) alpha of an input image, carried along
     layers: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. the merge's
-    # "uncertainty": written beside the pixels while they keep their size
+    # "uncertainty": written beside the pixels, resized with them
+    channels: dict[str, np.ndarray] = field(default_factory=dict)  # an input's other
+    # channels by name ("Z", "motion.Y"...), (H, W, 1): carried along, resized, written
 
     def attribute(self, name: str, default: object = None) -> object:
         """The header attribute ``name`` as a plain value (a foreign file's are typed)."""

@@ -50,6 +50,39 @@ def replace_non_finite(pixels: np.ndarray, source: str = "image"
     return out, note
 
 
+def _channel(image, spec, index: int, path: Path) -> np.ndarray:
+    """Channel ``index`` of ``path``, open as OpenImageIO's ``image``, ``(H, W, 1)``
+    float32."""
+    import OpenImageIO as oiio
+
+    values = image.read_image(0, 0, index, index + 1, oiio.FLOAT)
+    if values is None or image.has_error:
+        raise InputError(path, f"cannot decode channel {spec.channelnames[index]} "
+                               f"({library_message(image.geterror)})")
+    return np.asarray(values, dtype=np.float32).reshape(spec.height, spec.width, 1)
+
+
+def read_other_channels(path: str | Path) -> dict[str, np.ndarray]:
+    """Every channel of ``path`` but the colour :func:`read_image` reads and alpha, by
+    its name, each ``(H, W, 1)`` float32: an EXR's layers (hdrio's ``motion.Y`` and
+    ``uncertainty.R``, a renderer's ``Z`` and ``N.X``...), which the chain carries along
+    and writes back."""
+    import OpenImageIO as oiio
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
+    try:
+        spec = image.spec()
+        names = list(spec.channelnames)
+        colour = 3 if spec.nchannels >= 3 else 1
+        return {name: _channel(image, spec, index, Path(path))
+                for index, name in enumerate(names)
+                if index >= colour and name != "A"}
+    finally:
+        image.close()
+
+
 def read_image(path: str | Path, say=None, alpha: bool = False):
     """Read a float image (OpenEXR, Radiance HDR, ...) as float32 ``(H, W, C)`` RGB.
 
@@ -75,9 +108,7 @@ def read_image(path: str | Path, say=None, alpha: bool = False):
         names = list(spec.channelnames)
         opacity = None
         if alpha and "A" in names:
-            index = names.index("A")
-            opacity = image.read_image(0, 0, index, index + 1, oiio.FLOAT)
-            opacity = np.asarray(opacity, dtype=np.float32).reshape(spec.height, spec.width, 1)
+            opacity = _channel(image, spec, names.index("A"), path)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, channels)

@@ -265,7 +265,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
               pixel_type: str = "half", compression: str = "zip", scale: float = 1.0,
               layers: Mapping[str, np.ndarray] | None = None,
               observe: Callable[[np.ndarray], None] | None = None,
-              positive: bool = True) -> Path:
+              positive: bool = True,
+              channels: Mapping[str, np.ndarray] | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
@@ -279,25 +280,30 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
 
     ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
     channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the
-    image's own.
+    image's own; ``channels``: single channels (``(H, W, 1)``) written unscaled under
+    their own names after those (an input's layers, :func:`hdrio.io.images.read_other_channels`).
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
     factor = np.float32(scale)
     own = rgb.shape[-1]
-    names = list("RGBA"[:own]) if own in (3, 4) else ["Y"] if own == 1 else []
+    colour = 3 if own >= 3 else 1  # RGB or Y, then alpha (grey with alpha: Y, A)
+    names = (["R", "G", "B"] if colour == 3 else ["Y"]) + ["A"] * (own - colour)
     planes = [rgb]
     for name, layer in (layers or {}).items():
         layer = layer if layer.ndim == 3 else layer[..., None]
         planes.append(layer)
         names += [f"{name}.{c}" for c in ("RGB" if layer.shape[-1] == 3 else "Y")]
+    for name, channel in (channels or {}).items():
+        planes.append(channel)
+        names.append(name)
     # As half: the image's own channels scaled and kept positive (colour at least half's
     # smallest subnormal, so no pixel becomes 0; alpha 0 stays 0, e.g. pixels masked
     # everywhere: hdrio.merge.exclusion), the layers unscaled and kept finite.
     count = len(names)
     scales = [float(factor)] * own + [1.0] * (count - own)
-    lows = [HALF_MIN_POSITIVE if positive else -HALF_MAX] * min(own, 3) + [0.0] * (
-        own - min(own, 3)) + [-HALF_MAX] * (count - own)
+    lows = [HALF_MIN_POSITIVE if positive else -HALF_MAX] * colour + [0.0] * (
+        own - colour) + [-HALF_MAX] * (count - own)
     highs = [HALF_MAX] * count
 
     def band(rows: np.ndarray) -> np.ndarray:
@@ -316,10 +322,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     # No capture time known is none written: OpenImageIO stamps the time of writing as
     # capDate (the capture's date, to OpenEXR) where DateTime is absent.
     attributes = {"compression": compression, "DateTime": "", **(attributes or {})}
-    if not layers:
-        return write_image(path, rgb, pixel_type, attributes, band)
-    return write_image(path, _WithLayers(rgb, planes[1:]), pixel_type, attributes, band,
-                       channel_names=names)
+    image = rgb if len(planes) == 1 else _WithLayers(rgb, planes[1:])
+    return write_image(path, image, pixel_type, attributes, band, channel_names=names)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:

@@ -223,15 +223,17 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
                    alpha: np.ndarray | None = None,
                    observe: Callable[[np.ndarray], None] | None = None,
                    layers: dict[str, np.ndarray] | None = None,
-                   positive: bool = True) -> float:
+                   positive: bool = True,
+                   channels: dict[str, np.ndarray] | None = None) -> float:
     """Write scene-linear ``pixels`` as EXR, scaled into half's range when needed.
 
     ``scale`` is the factor already applied to the merged radiance (``--exposure``);
     ``hdrio:exposureScale`` (and ``whiteLuminance`` for absolute units) record it times
     the half-range factor, which is returned. ``alpha`` ``(H, W, 1)``, when given, is
     written unscaled as channel A. ``observe`` sees each band as stored. ``layers``: extra
-    unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``; ``positive``
-    false keeps zeros and negative values (an image the chain read). Source
+    unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``, and
+    ``channels`` under their own names (an input's); ``positive`` false keeps zeros and
+    negative values (an image the chain read). Source
     paths get their copies relative to ``path`` (:func:`hdrio.io.paths.with_relative_sources`).
     """
     extra = half_safe_scale(pixels) if pixel_type == "half" else 1.0
@@ -242,5 +244,6 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
     if alpha is not None:  # the band scaling below must leave alpha as it is
         pixels = np.concatenate([pixels, alpha / np.float32(extra)], axis=-1)
     write_exr(path, pixels, attributes, pixel_type=pixel_type, compression=compression,
-              scale=extra, observe=observe, layers=layers, positive=positive)
+              scale=extra, observe=observe, layers=layers, positive=positive,
+              channels=channels)
     return extra
