@@ -125,3 +125,35 @@ def test_merge_shoot_refuses_a_fixed_name_before_any_work(tmp_path):
     with pytest.raises(OutputError, match="would both write it"):
         merge_shoot(shoot, str(tmp_path / "fixed.exr"))
     assert h.snapshot(tmp_path) == before
+
+
+def test_a_pattern_without_group_names_the_output_after_the_brackets(brackets, tmp_path,
+                                                                     capsys):
+    # Outside --group the brackets given are the one set: {first_stem} is the first's
+    # stem in both front ends (the chain wrote "first.exr", its check's stand-in, and
+    # hdrio merge a file named "{first_stem}.exr").
+    first, last = Path(brackets[0]).stem, Path(brackets[-1]).stem
+    code, _, err = run(capsys, *brackets, "--merge", "-o", f"{tmp_path}/c/{{first_stem}}.exr",
+                       "--tonemap", "reinhard-global",
+                       "-o", f"{tmp_path}/c/{{last_stem}}_{{count}}.jpg")
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == sorted(
+        [f"{first}.exr", f"{last}_{len(brackets)}.jpg"])
+    code, _, err = run(capsys, "merge", *brackets, "-o", f"{tmp_path}/m/{{first_stem}}.exr",
+                       "--preview", f"{tmp_path}/m/{{last_stem}}.jpg", "-q")
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "m").iterdir()) == sorted(
+        [f"{first}.exr", f"{last}.jpg"])
+
+
+def test_a_pattern_that_names_an_input_is_refused_before_any_work(brackets, tmp_path,
+                                                                  capsys):
+    for argv in (["-v", *brackets, "--merge", "--tonemap", "reinhard-global", "-o",
+                  "{folder}/{first_stem}.png"],
+                 ["merge", *brackets, "-o", f"{tmp_path}/out.exr", "--preview",
+                  "{folder}/{last_stem}.png"]):
+        before = {p: Path(p).read_bytes() for p in brackets}
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and "would overwrite an input" in err, err
+        assert "reading" not in out + err  # refused before the brackets were read
+        assert {p: Path(p).read_bytes() for p in brackets} == before

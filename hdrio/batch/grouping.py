@@ -33,6 +33,7 @@ from pathlib import Path
 
 from hdrio.io.brackets import read_exif
 from hdrio.io.exposure import exposure_from_exif, exposure_from_filename
+from hdrio.io.paths import set_fields
 from hdrio.io.raw import RAW_SUFFIXES
 from hdrio.stack import same_exposure
 
@@ -88,9 +89,7 @@ class BracketSet:
     def fields(self, index: int) -> dict[str, str]:
         """Names for output patterns: ``{first_stem}``, ``{last_stem}``, ``{index}``,
         ``{count}``, ``{folder}`` (``index`` counts from 1)."""
-        return {"first_stem": self.frames[0].path.stem, "last_stem": self.frames[-1].path.stem,
-                "index": str(index), "count": str(len(self.frames)),
-                "folder": str(self.frames[0].path.parent)}
+        return set_fields(self.files, index)
 
 
 def list_images(folder: str | Path) -> list[Path]:

@@ -61,12 +61,15 @@ def _compression(chain: Chain, value: str) -> None:
 
 
 def output_path(chain: Chain, text: str) -> Path:
-    """``-o`` argument with the set's pattern fields (``{first_stem}``...) filled in."""
-    from hdrio.io.paths import fill_pattern
+    """``-o`` argument with the set's pattern fields (``{first_stem}``...) filled in:
+    those of ``--group``'s set, else of the chain's inputs so far as one set (stand-ins
+    before any: the check of the pattern)."""
+    from hdrio.io.paths import fill_pattern, set_fields
 
     if _pattern_free(Path(text)):
         return Path(text)
-    return fill_pattern(text, chain.fields or PATTERN_FIELDS)
+    return fill_pattern(text, chain.fields or (set_fields(chain.inputs) if chain.inputs
+                                               else PATTERN_FIELDS))
 
 
 def claim_output(chain: Chain, text: str) -> None:
@@ -87,21 +90,22 @@ def claim_output(chain: Chain, text: str) -> None:
 
 def _check_output(chain: Chain, text: str) -> None:
     image = chain.top()
-    path = Path(text)
+    claim_output(chain, text)  # (a pattern's syntax and fields checked here, too)
+    path = output_path(chain, text)  # a pattern filled in from the inputs so far
     check_output(path, EXR_SUFFIXES | PREVIEW_SUFFIXES,
                  [str(p) for p in chain.inputs] + [str(p) for p in chain.brackets])
     if path.suffix.lower() != ".exr" and not image.display:
         raise ChainError("the image is scene-linear; tone-map it first "
                          "(--tonemap reinhard-global) or write an .exr")
-    if _pattern_free(path):
-        chain.settings.setdefault("_written", []).append(str(path))
-    claim_output(chain, text)  # (a pattern's syntax and fields checked here, too)
+    if _pattern_free(Path(text)):
+        chain.settings.setdefault("_written", []).append(str(Path(text)))
 
 
 @operation("-o", "FILE", convert=_one, check=_check_output,
            help="write the top image (making missing folders): EXR for scene-linear (with "
                 "hdrio's header; a tone-mapped image is labelled display-referred), JPEG, "
-                "PNG or TIFF for a tone-mapped one; {first_stem} etc. name each set's output",
+                "PNG or TIFF for a tone-mapped one; {first_stem}, {last_stem}, {index}, {count} "
+                "and {folder} are the brackets' (each set's, with --group)",
            example="a.jpg b.jpg c.jpg --merge -o out.exr --tonemap reinhard-global -o out.jpg")
 def _output(chain: Chain, text: str) -> None:
     from hdrio.io.paths import with_relative_sources

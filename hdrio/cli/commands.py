@@ -41,7 +41,9 @@ def add_merge(sub) -> None:
     )
     parser.add_argument("images", nargs="+", help="bracketed 8- or 16-bit images")
     parser.add_argument("-o", "--output", required=True,
-                        help="output OpenEXR file (missing folders are made)")
+                        help="output OpenEXR file (missing folders are made); {first_stem}, "
+                             "{last_stem}, {count} and {folder} are the brackets' (e.g. "
+                             "'{first_stem}_hdr.exr')")
     parser.add_argument("-d", "--data-type", choices=["half", "float"], default="half",
                         help="EXR pixel type (default %(default)s)")
     parser.add_argument("--compression", metavar="NAME", default="zip",
@@ -79,14 +81,27 @@ def display_view_from(args: argparse.Namespace, config: str | None
     return display_view_names(display, view, config)
 
 
+def _filled(text: str, option: str, images: list) -> Path:
+    """An output name with its pattern fields (``{first_stem}``...) filled in from the
+    brackets as given, as the chain fills them (:func:`hdrio.io.paths.set_fields`)."""
+    from hdrio.io.paths import fill_pattern, is_pattern, set_fields
+
+    if not is_pattern(text) or not images:
+        return Path(text)
+    try:
+        return fill_pattern(text, set_fields(images))
+    except HdrioError as error:
+        raise HdrioError(f"{option} {text}: {error}") from None
+
+
 def run_merge(args: argparse.Namespace) -> int:
     # Everything is checked before any image is read: names, values, colour spaces,
     # displays, output folders.
     from hdrio.io.paths import check_outputs, expand_patterns
 
     args.images = expand_patterns(args.images)
-    output = Path(args.output)
-    preview = Path(args.preview) if args.preview else None
+    output = _filled(args.output, "-o", args.images)
+    preview = _filled(args.preview, "--preview", args.images) if args.preview else None
 
     check_outputs([(path, allowed) for path, allowed in ((output, EXR_SUFFIXES),
                                                          (preview, PREVIEW_SUFFIXES))

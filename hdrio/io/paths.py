@@ -197,6 +197,15 @@ def check_outputs(outputs: Iterable[tuple[str | Path, Iterable[str] | None]],
 _FIELD = re.compile(r"{(\w*)}")
 
 
+def set_fields(files: Sequence[str | Path], index: int = 1) -> dict[str, str]:
+    """Names for the output patterns of one bracket set, ``files`` in capture order
+    (or as given): ``{first_stem}``, ``{last_stem}``, ``{index}`` (from 1),
+    ``{count}``, ``{folder}`` (the first file's)."""
+    first, last = Path(files[0]), Path(files[-1])
+    return {"first_stem": first.stem, "last_stem": last.stem, "index": str(index),
+            "count": str(len(files)), "folder": str(first.parent)}
+
+
 def is_pattern(text: str | Path) -> bool:
     """Whether an output name has ``{...}`` fields to fill."""
     return "{" in str(text) or "}" in str(text)
