@@ -27,20 +27,21 @@ def check_number(option: str, value: object, *, minimum: float | None = None,
     option means, its default).
     """
     tail = f" ({hint})" if hint else ""
+    given = f"{option}{value}" if option.endswith("=") else f"{option} {value}"  # key=0.2
     try:
         number = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise NumberError(f"{option} {value!r}: not a number{tail}") from None
     if not math.isfinite(number):
-        raise NumberError(f"{option} {value}: must be a finite number{tail}")
+        raise NumberError(f"{given}: must be a finite number{tail}")
     if whole and number != int(number):
-        raise NumberError(f"{option} {value}: must be a whole number{tail}")
+        raise NumberError(f"{given}: must be a whole number{tail}")
     if above is not None and not number > above:
-        raise NumberError(f"{option} {value}: must be greater than {_shown(above)}{tail}")
+        raise NumberError(f"{given}: must be greater than {_shown(above)}{tail}")
     if minimum is not None and number < minimum:
-        raise NumberError(f"{option} {value}: must be at least {_shown(minimum)}{tail}")
+        raise NumberError(f"{given}: must be at least {_shown(minimum)}{tail}")
     if maximum is not None and number > maximum:
-        raise NumberError(f"{option} {value}: must be at most {_shown(maximum)}{tail}")
+        raise NumberError(f"{given}: must be at most {_shown(maximum)}{tail}")
     return int(number) if whole else number
 
 
@@ -82,5 +83,6 @@ TONEMAP_PARAMETERS: Mapping[str, dict[str, float]] = {
 def check_tonemap_parameters(operator: str, parameters: Mapping[str, float]) -> None:
     """Every parameter of a tone-mapping operator finite, and in range where known."""
     for name, value in parameters.items():
-        check_number(f"--tonemap {operator} {name}=", value,
+        shown = f"{value:g}" if isinstance(value, (int, float)) else value
+        check_number(f"{name}=", shown,  # the caller names --tonemap OPERATOR
                      **TONEMAP_PARAMETERS.get(name, {}))
