@@ -132,6 +132,25 @@ def test_chain_resizes_the_merges_layers_with_it(brackets, tmp_path, capsys):
     assert channels["uncertainty.R"].shape == channels["R"].shape == (24, 32)
 
 
+def test_chain_says_it_reads_the_first_part_of_a_multi_part_exr(tmp_path, capsys):
+    # A second part (here a depth pass) was dropped without a word.
+    source, out = tmp_path / "multi.exr", tmp_path / "out.exr"
+    specs = [oiio.ImageSpec(8, 6, 3, "half"), oiio.ImageSpec(8, 6, 1, "half")]
+    specs[0].attribute("name", "beauty")
+    specs[1].attribute("name", "depth")
+    specs[1].channelnames = ("Z",)
+    output = oiio.ImageOutput.create(str(source))
+    assert output.open(str(source), specs)
+    output.write_image(np.full((6, 8, 3), 0.5, np.float16))
+    assert output.open(str(source), specs[1], "AppendSubimage")
+    output.write_image(np.full((6, 8, 1), 2.0, np.float16))
+    output.close()
+    code, _, err = run(capsys, source, "--exposure", "1", "-o", out)
+    assert code == 0, err
+    assert "2 parts (beauty, depth); the chain reads and writes the first alone" in err
+    np.testing.assert_array_equal(_channels(out)["R"], 1.0)
+
+
 def test_chain_writes_a_grey_exr_with_alpha(tmp_path, capsys):
     # Y and A: an internal error before (the writer named two channels none).
     pixels = np.stack([np.linspace(0.1, 3.0, 48).reshape(6, 8), np.ones((6, 8))], axis=-1)

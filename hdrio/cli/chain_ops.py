@@ -81,8 +81,13 @@ def read_input(chain: Chain, path: Path) -> None:
         chain.brackets.extend(files)
         return
     from hdrio.io.header import read_typed_attributes
-    from hdrio.io.images import read_image, read_other_channels
+    from hdrio.io.images import part_names, read_image, read_other_channels
 
+    parts = part_names(path)
+    if len(parts) > 1:
+        named = ", ".join(name or "unnamed" for name in parts)
+        chain.note(f"{path}: {len(parts)} parts ({named}); the chain reads and writes the "
+                   "first alone")
     pixels, alpha = read_image(path, say=chain.note, alpha=True)
     attributes = {name: value for name, value in read_typed_attributes(path).items()
                   if not name.startswith(_LAYOUT_PREFIXES)}

@@ -83,6 +83,24 @@ def read_other_channels(path: str | Path) -> dict[str, np.ndarray]:
         image.close()
 
 
+def part_names(path: str | Path) -> list[str]:
+    """The names of the parts of ``path`` (an OpenEXR multi-part file's; OpenImageIO's
+    subimages), in order, ``""`` where a part has none; one entry for a plain image."""
+    import OpenImageIO as oiio
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
+    try:
+        names, part = [], 0
+        while image.seek_subimage(part, 0):
+            names.append(image.spec().get_string_attribute("name"))
+            part += 1
+        return names
+    finally:
+        image.close()
+
+
 def read_image(path: str | Path, say=None, alpha: bool = False):
     """Read a float image (OpenEXR, Radiance HDR, ...) as float32 ``(H, W, C)`` RGB.
 
