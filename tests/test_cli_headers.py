@@ -151,6 +151,28 @@ def test_chain_says_it_reads_the_first_part_of_a_multi_part_exr(tmp_path, capsys
     np.testing.assert_array_equal(_channels(out)["R"], 1.0)
 
 
+def test_chain_keeps_a_crops_place_in_its_frame(tmp_path, capsys):
+    # An 8x6 crop at (2, 1) of a 16x12 plate (OpenEXR's data and display windows): it
+    # was written as an 8x6 image of its own, at the frame's corner.
+    spec = oiio.ImageSpec(8, 6, 3, "half")
+    spec.x, spec.y, spec.full_width, spec.full_height = 2, 1, 16, 12
+    source = tmp_path / "crop.exr"
+    output = oiio.ImageOutput.create(str(source))
+    output.open(str(source), spec)
+    output.write_image(np.full((6, 8, 3), 0.5, np.float16))
+    output.close()
+    brighter, small = tmp_path / "brighter.exr", tmp_path / "small.exr"
+    code, _, err = run(capsys, source, "--exposure", "1", "-o", brighter, "--resize", "50%",
+                       "-o", small)
+    assert code == 0, err
+    for path, data, display in ((brighter, ([2, 1], [9, 6]), [15, 11]),
+                                (small, ([1, 0], [4, 2]), [7, 5])):  # the frame halved too
+        header = _header(path)
+        assert [list(corner) for corner in header["dataWindow"]] == list(data)
+        assert list(header["displayWindow"][1]) == display
+    np.testing.assert_array_equal(_channels(brighter)["G"], 1.0)
+
+
 def test_chain_writes_a_grey_exr_with_alpha(tmp_path, capsys):
     # Y and A: an internal error before (the writer named two channels none).
     pixels = np.stack([np.linspace(0.1, 3.0, 48).reshape(6, 8), np.ones((6, 8))], axis=-1)

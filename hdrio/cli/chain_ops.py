@@ -81,7 +81,7 @@ def read_input(chain: Chain, path: Path) -> None:
         chain.brackets.extend(files)
         return
     from hdrio.io.header import read_typed_attributes
-    from hdrio.io.images import part_names, read_image, read_other_channels
+    from hdrio.io.images import part_names, read_image, read_other_channels, read_window
 
     parts = part_names(path)
     if len(parts) > 1:
@@ -92,7 +92,7 @@ def read_input(chain: Chain, path: Path) -> None:
     attributes = {name: value for name, value in read_typed_attributes(path).items()
                   if not name.startswith(_LAYOUT_PREFIXES)}
     image = Image(pixels, attributes, str(path), alpha=alpha,
-                  channels=read_other_channels(path))
+                  channels=read_other_channels(path), window=read_window(path))
     image.display = image.attribute("hdrio:units") == "display-referred"
     image.scale = float(image.attribute("hdrio:exposureScale", 1.0))  # type: ignore[arg-type]
     chain.images.append(image)
@@ -185,6 +185,8 @@ def _resize(chain: Chain, size: str) -> None:
         new_width = new_width or round(width * new_height / height)
         new_height = new_height or round(height * new_width / width)
     size_ = max(1, new_width), max(1, new_height)
+    if image.window is not None:  # the frame resized with the pixels
+        image.window = image.window.scaled(size_[0] / width, size_[1] / height)
     image.pixels = resize(image.pixels, *size_)
     if image.alpha is not None:
         image.alpha = resize(image.alpha, *size_)

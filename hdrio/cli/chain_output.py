@@ -129,14 +129,14 @@ def _output(chain: Chain, text: str) -> None:
             [image.pixels, image.alpha], axis=-1)
         write_exr(path, pixels, with_relative_sources(image.attributes, path),
                   pixel_type=data_type, compression=compression, positive=False,
-                  channels=image.channels)
+                  channels=image.channels, window=image.window)
     else:
         report = merge_report(image)
         write_radiance(path, image.pixels, image.attributes, pixel_type=data_type,
                        compression=compression, scale=image.scale, alpha=image.alpha,
                        observe=None if report is None else report.add, layers=image.layers,
                        positive=image.statistics is not None,  # a merge's own radiance
-                       channels=image.channels)
+                       channels=image.channels, window=image.window)
     chain.progress.step(f"wrote {path}")
     chain.say(f"wrote {path}")
     if report is not None and chain.settings.get("report"):

@@ -113,6 +113,7 @@ class Image:
     # "uncertainty": written beside the pixels, resized with them
     channels: dict[str, np.ndarray] = field(default_factory=dict)  # an input's other
     # channels by name ("Z", "motion.Y"...), (H, W, 1): carried along, resized, written
+    window: Any = None  # an input's place in its frame (hdrio.io.write.Window), or None
 
     def attribute(self, name: str, default: object = None) -> object:
         """The header attribute ``name`` as a plain value (a foreign file's are typed)."""

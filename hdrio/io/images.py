@@ -83,6 +83,22 @@ def read_other_channels(path: str | Path) -> dict[str, np.ndarray]:
         image.close()
 
 
+def read_window(path: str | Path):
+    """The first part's :class:`hdrio.io.write.Window` of ``path`` (``None`` where its
+    pixels are the whole frame)."""
+    import OpenImageIO as oiio
+
+    from hdrio.io.write import Window
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
+    try:
+        return Window.of(image.spec())
+    finally:
+        image.close()
+
+
 def part_names(path: str | Path) -> list[str]:
     """The names of the parts of ``path`` (an OpenEXR multi-part file's; OpenImageIO's
     subimages), in order, ``""`` where a part has none; one entry for a plain image."""

@@ -32,6 +32,36 @@ _AGGREGATE_LENGTHS = (2, 3, 9, 16)
 
 
 @dataclass(frozen=True)
+class Window:
+    """Where an image's pixels lie in its frame (OpenEXR's data and display windows):
+    the first pixel at ``(x, y)`` of a frame ``full_width x full_height`` whose corner is
+    ``(full_x, full_y)``. A crop, or a render with overscan, keeps its place in the plate
+    it belongs to."""
+
+    x: int
+    y: int
+    full_x: int
+    full_y: int
+    full_width: int
+    full_height: int
+
+    @classmethod
+    def of(cls, spec) -> Window | None:
+        """An OpenImageIO spec's window; ``None`` where the pixels are the whole frame."""
+        window = cls(spec.x, spec.y, spec.full_x, spec.full_y, spec.full_width,
+                     spec.full_height)
+        plain = cls(0, 0, 0, 0, spec.width, spec.height)
+        return None if window == plain else window
+
+    def scaled(self, x_factor: float, y_factor: float) -> Window:
+        """The window of the image resized by these factors (the frame with it)."""
+        return Window(round(self.x * x_factor), round(self.y * y_factor),
+                      round(self.full_x * x_factor), round(self.full_y * y_factor),
+                      max(1, round(self.full_width * x_factor)),
+                      max(1, round(self.full_height * y_factor)))
+
+
+@dataclass(frozen=True)
 class Typed:
     """An attribute value with its OpenImageIO type name (``"float[3]"``, ``"rational2i"``),
     as read from another file: written back with the same type."""
@@ -179,13 +209,15 @@ def _publish(temp: Path, path: Path) -> None:
 def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
                 attributes: Mapping[str, object] | None = None,
                 band: Callable[[np.ndarray], np.ndarray] | None = None,
-                channel_names: Sequence[str] | None = None) -> Path:
+                channel_names: Sequence[str] | None = None,
+                window: Window | None = None) -> Path:
     """Write ``pixels`` (H x W x C) to ``path`` atomically; the format follows the suffix.
 
     Rows go out in bands (:func:`rows_per_write`), each through ``band`` first when given
     (a conversion applied band by band needs no full-size copy of the image). ``pixels`` may be any
     object with ``shape`` whose row slices are arrays. ``channel_names`` replaces
-    OpenImageIO's defaults; one channel is named ``Y`` (OpenEXR's luminance).
+    OpenImageIO's defaults; one channel is named ``Y`` (OpenEXR's luminance). ``window``
+    places the pixels in a larger frame (OpenEXR's data and display windows).
     """
     import OpenImageIO as oiio
 
@@ -197,6 +229,10 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
         spec.channelnames = tuple(channel_names)
     elif channels == 1:
         spec.channelnames = ("Y",)
+    if window is not None:
+        spec.x, spec.y = window.x, window.y
+        spec.full_x, spec.full_y = window.full_x, window.full_y
+        spec.full_width, spec.full_height = window.full_width, window.full_height
     for name, value in (attributes or {}).items():
         type_name, stored = _type_of(value)
         spec.attribute(name, oiio.TypeDesc(type_name), stored)
@@ -217,7 +253,8 @@ def write_image(path: str | Path, pixels: np.ndarray, pixel_type: str,
 
             # The next band is converted (and observed) while this one is compressed.
             for top, rows in read_ahead(bands()):
-                if not output.write_scanlines(top, top + rows.shape[0], 0, rows):
+                first = spec.y + top  # in the frame's rows
+                if not output.write_scanlines(first, first + rows.shape[0], 0, rows):
                     raise OutputError(f"{path}: write failed ({library_message(output.geterror)})")
         finally:
             output.close()
@@ -266,7 +303,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
               layers: Mapping[str, np.ndarray] | None = None,
               observe: Callable[[np.ndarray], None] | None = None,
               positive: bool = True,
-              channels: Mapping[str, np.ndarray] | None = None) -> Path:
+              channels: Mapping[str, np.ndarray] | None = None,
+              window: Window | None = None) -> Path:
     """Write scene-linear RGB as OpenEXR (half by default), ZIP-compressed, atomically.
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
@@ -281,7 +319,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
     channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the
     image's own; ``channels``: single channels (``(H, W, 1)``) written unscaled under
-    their own names after those (an input's layers, :func:`hdrio.io.images.read_other_channels`).
+    their own names after those (an input's layers, :func:`hdrio.io.images.read_other_channels`);
+    ``window``: the pixels' place in a larger frame (:class:`Window`).
     """
     if pixel_type not in ("half", "float"):
         raise ValueError(f"EXR pixel type must be 'half' or 'float', not {pixel_type!r}")
@@ -323,7 +362,8 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     # capDate (the capture's date, to OpenEXR) where DateTime is absent.
     attributes = {"compression": compression, "DateTime": "", **(attributes or {})}
     image = rgb if len(planes) == 1 else _WithLayers(rgb, planes[1:])
-    return write_image(path, image, pixel_type, attributes, band, channel_names=names)
+    return write_image(path, image, pixel_type, attributes, band, channel_names=names,
+                       window=window)
 
 
 def write_preview(path: str | Path, display_rgb: np.ndarray) -> Path:

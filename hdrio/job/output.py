@@ -14,7 +14,7 @@ from hdrio import __version__
 from hdrio.cms.colour_stage import colour_attributes, output_radiance
 from hdrio.io.orientation import UPRIGHT, turned
 from hdrio.io.paths import resolved, with_relative_sources
-from hdrio.io.write import HALF_MAX, write_exr
+from hdrio.io.write import HALF_MAX, Window, write_exr
 from hdrio.job.result import MergeResult
 from hdrio.merge.weighted_mean import MergeStatistics, clipped_everywhere_mask
 from hdrio.radiometry.levels import code_of
@@ -224,7 +224,8 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
                    observe: Callable[[np.ndarray], None] | None = None,
                    layers: dict[str, np.ndarray] | None = None,
                    positive: bool = True,
-                   channels: dict[str, np.ndarray] | None = None) -> float:
+                   channels: dict[str, np.ndarray] | None = None,
+                   window: Window | None = None) -> float:
     """Write scene-linear ``pixels`` as EXR, scaled into half's range when needed.
 
     ``scale`` is the factor already applied to the merged radiance (``--exposure``);
@@ -233,7 +234,8 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
     written unscaled as channel A. ``observe`` sees each band as stored. ``layers``: extra
     unscaled layers (:func:`hdrio.io.write.write_exr`), e.g. ``uncertainty``, and
     ``channels`` under their own names (an input's); ``positive`` false keeps zeros and
-    negative values (an image the chain read). Source
+    negative values (an image the chain read); ``window`` places the pixels in a larger
+    frame (an input's, :class:`hdrio.io.write.Window`). Source
     paths get their copies relative to ``path`` (:func:`hdrio.io.paths.with_relative_sources`).
     """
     extra = half_safe_scale(pixels) if pixel_type == "half" else 1.0
@@ -245,5 +247,5 @@ def write_radiance(path: str | Path, pixels: np.ndarray, attributes: dict[str, o
         pixels = np.concatenate([pixels, alpha / np.float32(extra)], axis=-1)
     write_exr(path, pixels, attributes, pixel_type=pixel_type, compression=compression,
               scale=extra, observe=observe, layers=layers, positive=positive,
-              channels=channels)
+              channels=channels, window=window)
     return extra
