@@ -173,6 +173,26 @@ def test_chain_keeps_a_crops_place_in_its_frame(tmp_path, capsys):
     np.testing.assert_array_equal(_channels(brighter)["G"], 1.0)
 
 
+def test_chain_writes_a_float_exr_as_float_unless_told(tmp_path, capsys):
+    # A float EXR beyond half's range (a sun at 1e5, depth at 123456) came out as half,
+    # its colour halved (recorded only in hdrio:exposureScale) and its depth clamped.
+    spec = oiio.ImageSpec(8, 6, 4, "float")
+    spec.channelnames = ("R", "G", "B", "Z")
+    pixels = np.full((6, 8, 4), 0.5, np.float32)
+    pixels[0, 0, :3], pixels[..., 3] = 1e5, 123456.0
+    source, copy, small = tmp_path / "sun.exr", tmp_path / "copy.exr", tmp_path / "half.exr"
+    output = oiio.ImageOutput.create(str(source))
+    output.open(str(source), spec)
+    output.write_image(pixels)
+    output.close()
+    code, _, err = run(capsys, source, "-o", copy, "-d", "half", "-o", small)
+    assert code == 0, err
+    for name, c in zip("RGBZ", range(4)):
+        np.testing.assert_array_equal(_channels(copy)[name], pixels[..., c])
+    assert _header(copy)["hdrio:exposureScale"] == 1.0
+    assert "(half)" in run(capsys, "info", small)[1].splitlines()[0]
+
+
 def test_chain_writes_a_grey_exr_with_alpha(tmp_path, capsys):
     # Y and A: an internal error before (the writer named two channels none).
     pixels = np.stack([np.linspace(0.1, 3.0, 48).reshape(6, 8), np.ones((6, 8))], axis=-1)

@@ -46,7 +46,8 @@ def _compression_name(values: list[str]) -> str:
 
 
 @operation("-d", "TYPE", convert=_pixel_type,
-           help="pixel type of the following EXR outputs: half (default) or float",
+           help="pixel type of the following EXR outputs: half or float (default: an "
+                "input EXR's own, a float one's float; half for a merge)",
            example="a.jpg b.jpg c.jpg --merge -d float -o float.exr")
 def _data_type(chain: Chain, value: str) -> None:
     chain.settings["data_type"] = value
@@ -119,7 +120,7 @@ def _output(chain: Chain, text: str) -> None:
         raise ChainError("the image is scene-linear; tone-map it first "
                          "(--tonemap reinhard-global) or write an .exr")
     make_parent(path)
-    data_type = chain.settings.get("data_type", "half")
+    data_type = chain.settings.get("data_type") or image.pixel_type
     compression = chain.settings.get("compression", "zip")
     report = None
     if path.suffix.lower() != ".exr":

@@ -114,6 +114,7 @@ class Image:
     channels: dict[str, np.ndarray] = field(default_factory=dict)  # an input's other
     # channels by name ("Z", "motion.Y"...), (H, W, 1): carried along, resized, written
     window: Any = None  # an input's place in its frame (hdrio.io.write.Window), or None
+    pixel_type: str = "half"  # what -o writes without -d: an input's own (float stays float)
 
     def attribute(self, name: str, default: object = None) -> object:
         """The header attribute ``name`` as a plain value (a foreign file's are typed)."""

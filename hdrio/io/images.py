@@ -83,9 +83,10 @@ def read_other_channels(path: str | Path) -> dict[str, np.ndarray]:
         image.close()
 
 
-def read_window(path: str | Path):
-    """The first part's :class:`hdrio.io.write.Window` of ``path`` (``None`` where its
-    pixels are the whole frame)."""
+def read_layout(path: str | Path):
+    """``(window, pixel_type)`` of the first part of ``path``: its
+    :class:`hdrio.io.write.Window` (``None`` where its pixels are the whole frame) and
+    ``"half"`` where every channel is half, else ``"float"``."""
     import OpenImageIO as oiio
 
     from hdrio.io.write import Window
@@ -94,7 +95,9 @@ def read_window(path: str | Path):
     if image is None:
         raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
     try:
-        return Window.of(image.spec())
+        spec = image.spec()
+        formats = [str(f) for f in (spec.channelformats or [spec.format])]
+        return Window.of(spec), "half" if set(formats) == {"half"} else "float"
     finally:
         image.close()
 
