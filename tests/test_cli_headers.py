@@ -193,6 +193,23 @@ def test_chain_writes_a_float_exr_as_float_unless_told(tmp_path, capsys):
     assert "(half)" in run(capsys, "info", small)[1].splitlines()[0]
 
 
+def test_colorconvert_from_another_space_than_the_label_is_noted(tmp_path, capsys):
+    source, out = tmp_path / "aces.exr", tmp_path / "out.exr"
+    spec = oiio.ImageSpec(8, 6, 3, "half")
+    spec.attribute("hdrio:colorSpace", "ACEScg")
+    output = oiio.ImageOutput.create(str(source))
+    output.open(str(source), spec)
+    output.write_image(np.full((6, 8, 3), 0.5, np.float16))
+    output.close()
+    code, _, err = run(capsys, source, "--colorconvert", "lin_rec709_scene", "ACEScg",
+                       "-o", out)
+    assert code == 0, err
+    assert "is labelled ACEScg; converted from lin_rec709_scene as told" in err
+    code, _, err = run(capsys, source, "--colorconvert", "ACEScg", "lin_rec709_scene",
+                       "-o", out)
+    assert code == 0 and "labelled" not in err, err
+
+
 def test_chain_writes_a_grey_exr_with_alpha(tmp_path, capsys):
     # Y and A: an internal error before (the writer named two channels none).
     pixels = np.stack([np.linspace(0.1, 3.0, 48).reshape(6, 8), np.ones((6, 8))], axis=-1)

@@ -43,9 +43,23 @@ def _check_colorconvert(chain: Chain, value: tuple[str, str]) -> None:
     from hdrio.cms.spaces import canonical_space
 
     image = needs_scene_linear(chain)
-    for name in value:
-        canonical_space(name, _config(chain))
+    source, target = (canonical_space(name, _config(chain)) for name in value)
+    labelled = image.attribute("hdrio:colorSpace")
+    said = None if labelled is None else _canonical_or_none(str(labelled), chain)
+    if said is not None and said != source:
+        chain.note(f"{image.label} is labelled {labelled}; converted from {value[0]} as "
+                   "told")
     image.attributes["hdrio:colorSpace"] = value[1]
+
+
+def _canonical_or_none(name: str, chain: Chain) -> str | None:
+    from hdrio.cms.spaces import canonical_space
+    from hdrio.errors import HdrioError
+
+    try:
+        return canonical_space(name, _config(chain))
+    except HdrioError:  # a space this config does not know: nothing to compare
+        return None
 
 
 @operation("--colorconvert", "FROM", "TO", convert=lambda values: (values[0], values[1]),
