@@ -171,6 +171,7 @@ def test_chain_keeps_a_crops_place_in_its_frame(tmp_path, capsys):
         assert [list(corner) for corner in header["dataWindow"]] == list(data)
         assert list(header["displayWindow"][1]) == display
     np.testing.assert_array_equal(_channels(brighter)["G"], 1.0)
+    assert "8x6 at (2, 1) of a 16x12 frame" in run(capsys, "info", brighter)[1]
 
 
 def test_chain_writes_a_float_exr_as_float_unless_told(tmp_path, capsys):

@@ -23,7 +23,11 @@ def read_header(path: str | Path) -> dict[str, object]:
         try:
             spec = image.spec()
             header: dict[str, object] = {
-                ".resolution": f"{spec.width}x{spec.height}",
+                ".resolution": f"{spec.width}x{spec.height}" + (
+                    "" if (spec.x, spec.y, spec.full_x, spec.full_y, spec.full_width,
+                           spec.full_height) == (0, 0, 0, 0, spec.width, spec.height)
+                    else f" at ({spec.x}, {spec.y}) of a {spec.full_width}x"
+                         f"{spec.full_height} frame"),
                 ".channels": ",".join(spec.channelnames),
                 ".format": str(spec.format),
             }
