@@ -109,6 +109,7 @@ def test_chain_carries_an_inputs_other_channels(tmp_path, capsys):
     assert code == 0, err
     before, after, resized = _channels(source), _channels(brighter), _channels(small)
     assert sorted(after) == sorted(resized) == sorted(names)
+    assert "with alpha, Z, N.X, N.Y, N.Z, motion.Y" in run(capsys, source, "--info")[1]
     for name in names:  # x2 is exact in half floats
         expected = 2 * before[name] if name in "RGB" else before[name]
         np.testing.assert_array_equal(after[name], expected, err_msg=name)

@@ -179,7 +179,13 @@ def _info(chain: Chain, _values: list[str]) -> None:
     image = chain.top()
     height, width, channels = image.pixels.shape
     kind = "display-referred (sRGB)" if image.display else "scene-linear"
-    chain.say(f"{image.label}: {width}x{height}, {channels} channels, {kind}")
+    carried = (["alpha"] if image.alpha is not None else []) + list(image.layers) + list(
+        image.channels)
+    window = image.window
+    place = "" if window is None else (f" at ({window.x}, {window.y}) of a "
+                                       f"{window.full_width}x{window.full_height} frame")
+    chain.say(f"{image.label}: {width}x{height}{place}, {channels} channels, {kind}"
+              + (f"; with {', '.join(carried)}" if carried else ""))
     for name in ("hdrio:responseMethod", "hdrio:exposureSource", "hdrio:mergeDomain"):
         if name in image.attributes:
             chain.say(f"  {name:24s} {image.attribute(name)}")
