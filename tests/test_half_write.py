@@ -6,11 +6,14 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from hdrio.cms.checks import StreamingCheck, check_exr
 from hdrio.io.half import to_half
 from hdrio.io.write import HALF_MAX, HALF_MIN_POSITIVE, write_exr
+from hdrio.job.options import MergeOptions
+from hdrio.job.run import merge_files
 from hdrio.parallel import map_on_threads
 
 
@@ -113,10 +116,56 @@ def test_the_file_and_its_check_do_not_depend_on_the_threads(tmp_path, monkeypat
     for report in reports.values():
         assert report.luminance_percentiles == read_back.luminance_percentiles
         assert report.dynamic_range_stops == read_back.dynamic_range_stops
-        assert report.negative == read_back.negative == 0  # kept positive in half
+        assert report.negative == read_back.negative == 1  # kept, as a float EXR keeps it
 
 
 def test_map_on_threads_keeps_the_items_order(monkeypatch):
     monkeypatch.setenv("HDRIO_THREADS", "4")
     assert map_on_threads(lambda k: k * k, list(range(20))) == [k * k for k in range(20)]
     assert map_on_threads(str, []) == []
+
+
+@pytest.mark.parametrize("channels", [3, 5])
+def test_floors_raise_values_from_0_and_leave_negative_ones(channels):
+    # A merge's colour: 0 and tiny values become half's smallest subnormal (no pixel 0),
+    # a negative one (outside the output's gamut) stays as float would keep it.
+    values = np.array([0.0, 1e-9, -1e-9, -3.5, 2.0, HALF_MIN_POSITIVE, np.nan],
+                      np.float32)
+    pixels = np.repeat(values[:, None, None], channels, axis=2)
+    floors = [HALF_MIN_POSITIVE] * 3 + [0.0] * (channels - 3)
+    made = to_half(pixels, [1.0] * channels, [-HALF_MAX] * channels, [HALF_MAX] * channels,
+                   floors=floors).astype(np.float32)
+    floored = np.array([HALF_MIN_POSITIVE, HALF_MIN_POSITIVE, -0.0, -3.5, 2.0,
+                        HALF_MIN_POSITIVE, np.nan], np.float32)
+    np.testing.assert_array_equal(made[:, 0, 0], floored)
+    if channels == 5:  # no floor: as NumPy rounds
+        np.testing.assert_array_equal(made[:, 0, 4], values.astype(np.float16))
+
+
+def test_half_and_float_merges_agree_outside_the_gamut(write_brackets, tmp_path):
+    # Display P3 brackets merged to linear Rec.709: saturated colours come out negative.
+    # The half EXR clamped them to half's smallest value; the float one kept them.
+    from tests.conftest import DEFAULT_EXPOSURES
+
+    paths = write_brackets(DEFAULT_EXPOSURES, size=(24, 32))
+    for path in paths:  # a saturated green patch, in every bracket
+        buffer = oiio.ImageBuf(str(path))
+        codes = buffer.get_pixels(oiio.UINT8)
+        codes[4:12, 4:12] = (np.asarray(codes[4:12, 4:12], np.int32) * (0, 1, 0)).astype(
+            np.uint8)
+        buffer.set_pixels(oiio.ROI(), codes)
+        assert buffer.write(str(path))
+    outputs = {}
+    for pixel_type in ("half", "float"):
+        outputs[pixel_type] = tmp_path / f"{pixel_type}.exr"
+        merge_files(paths, outputs[pixel_type], pixel_type=pixel_type,
+                    options=MergeOptions(input_encoding="Display P3", align="off",
+                                         deghost="off"))
+    half, single = (oiio.ImageBuf(str(outputs[t])).get_pixels(oiio.FLOAT)
+                    for t in ("half", "float"))
+    assert (single < -1e-3).any()  # the patch's red and blue, outside Rec.709
+    # Half's precision (11 bits) and its scale factor, where the float EXR has one too.
+    scale = float(oiio.ImageBuf(str(outputs["half"])).spec().get_float_attribute(
+        "hdrio:exposureScale")) / float(oiio.ImageBuf(str(outputs["float"])).spec()
+                                        .get_float_attribute("hdrio:exposureScale"))
+    np.testing.assert_allclose(half / scale, single, rtol=2e-3, atol=1e-6)

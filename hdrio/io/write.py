@@ -309,10 +309,10 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
 
     ``scale`` multiplies the pixels on the way out (band by band: ``rgb`` is not copied
     or changed). Half floats hold 2**-24 .. 65504: values beyond are clamped into that
-    range (so no pixel of a merge's radiance becomes 0 or Inf); callers keep radiance
-    inside it (see :func:`hdrio.job.output.half_safe_scale`). ``positive`` false keeps
-    zeros and negative values (another program's image, a tone-mapped one) as they are,
-    clamped to +-65504 only. ``observe(rows)``, when given, sees the
+    range (so no pixel of a merge's radiance becomes 0 or Inf; negative values, colours
+    outside the output's gamut, are kept down to -65504); callers keep radiance inside it
+    (see :func:`hdrio.job.output.half_safe_scale`). ``positive`` false also keeps zeros
+    (another program's image, a tone-mapped one). ``observe(rows)``, when given, sees the
     image's own channels exactly as stored, piece by piece (a half image's as
     ``float16``), possibly from several threads at once.
 
@@ -336,13 +336,15 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     for name, channel in (channels or {}).items():
         planes.append(channel)
         names.append(name)
-    # As half: the image's own channels scaled and kept positive (colour at least half's
-    # smallest subnormal, so no pixel becomes 0; alpha 0 stays 0, e.g. pixels masked
-    # everywhere: hdrio.merge.exclusion), the layers unscaled and kept finite.
+    # As half: the image's own channels scaled, a merge's colour from 0 up raised to
+    # half's smallest subnormal (no pixel becomes 0; a negative value, a colour outside
+    # the output's gamut, stays negative, as a float EXR keeps it), alpha at least 0
+    # (alpha 0 stays 0, e.g. pixels masked everywhere: hdrio.merge.exclusion), the
+    # layers unscaled and kept finite.
     count = len(names)
     scales = [float(factor)] * own + [1.0] * (count - own)
-    lows = [HALF_MIN_POSITIVE if positive else -HALF_MAX] * colour + [0.0] * (
-        own - colour) + [-HALF_MAX] * (count - own)
+    lows = [-HALF_MAX] * colour + [0.0] * (own - colour) + [-HALF_MAX] * (count - own)
+    floors = [HALF_MIN_POSITIVE if positive else 0.0] * colour + [0.0] * (count - colour)
     highs = [HALF_MAX] * count
 
     def band(rows: np.ndarray) -> np.ndarray:
@@ -350,7 +352,7 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
             from hdrio.io.half import to_half  # numba: only for half EXRs
 
             return to_half(rows, scales, lows, highs, observe and (lambda done: observe(
-                done[..., :own])))
+                done[..., :own])), floors)
         rows = np.array(rows, dtype=np.float32)
         if factor != 1:
             rows[..., :own] *= factor
