@@ -32,6 +32,9 @@ def test_encoding_names_and_aliases():
     ({"ICCDescription": "Adobe RGB (1998)"}, "Adobe RGB (1998)"),
     ({"ICCDescription": "sRGB IEC61966-2.1", "ExifColorSpace": 65535}, "sRGB"),
     ({"ICCDescription": "Display P3"}, "Display P3"),
+    ({"ICCDescription": "ITU-R BT.2020"}, "Rec.2020"),
+    ({"ICCDescription": "ProPhoto RGB", "ExifColorSpace": 65535}, ""),  # not one we read
+    ({"ICCDescription": "Camera RGB Profile"}, None),  # canal's: names no encoding
     ({"ExifColorSpace": 1}, "sRGB"),
     ({"ExifColorSpace": 65535}, None),  # 'uncalibrated': the file does not say
     ({}, None)])
@@ -47,6 +50,32 @@ def test_metadata_wins_then_option_then_srgb():
     assert resolve_encoding(["a", "b"], [{}, {}]) == (encoding("sRGB"), "default")
     with pytest.raises(InputError, match="b.jpg: is Adobe RGB .* but a.jpg is sRGB"):
         resolve_encoding(["a.jpg", "b.jpg"], [srgb, {"ICCDescription": "Adobe RGB (1998)"}])
+
+
+def test_a_profile_of_another_encoding_is_refused_unless_the_option_says():
+    prophoto = {"ICCDescription": "ProPhoto RGB"}
+    with pytest.raises(InputError, match="b.tif: its ICC profile 'ProPhoto RGB' is not an "
+                                         "encoding hdrio reads .* --input-encoding"):
+        resolve_encoding(["a.tif", "b.tif"], [{}, prophoto])
+    assert resolve_encoding(["a.tif", "b.tif"], [prophoto, prophoto], "Rec.2020") == (
+        encoding("Rec.2020"), "option")
+
+
+def test_a_prophoto_stack_stops_before_the_solve(write_brackets, monkeypatch):
+    # As a Lightroom 16-bit TIFF export reads (its profile's description, as OpenImageIO
+    # gives it): refused at the first stage, before the response is solved.
+    from dataclasses import replace
+
+    from hdrio.job import stages
+
+    stack = read_brackets(write_brackets())
+    stack = replace(stack, metadata=[{**m, "ICCDescription": "ProPhoto RGB"}
+                                     for m in stack.metadata])
+    solved = []
+    monkeypatch.setattr(stages, "response_solver", lambda *a, **k: solved.append(1))
+    with pytest.raises(InputError, match="ICC profile 'ProPhoto RGB' is not an encoding"):
+        merge_stack(stack, MergeOptions())
+    assert not solved
 
 
 def test_frobisher_icc_profile_says_srgb(shared_data):

@@ -234,8 +234,9 @@ MERGE_OPTIONS: tuple[Option, ...] = (
                 "ocio://cg-config-latest)"),
     Option("--input-encoding", ("NAME",), "input_encoding", encoding_name,
            example=("Display P3",), group=_COLOUR,
-           help="encoding of the brackets when their ICC profile and EXIF do not say: "
-                "sRGB (default), 'Adobe RGB (1998)', 'Display P3'"),
+           help="encoding of the brackets when their ICC profile and EXIF do not say, or "
+                "their profile is of one hdrio does not read (ProPhoto RGB): sRGB "
+                "(default), 'Adobe RGB (1998)', 'Display P3', Rec.2020"),
     Option("--white-balance", ("X,Y,W,H|R,G,B",), "white_balance", white_balance,
            example=("8,8,16,16",), group=_COLOUR,
            help="X,Y,W,H: make this region neutral grey; R,G,B: camera RAW white-balance "

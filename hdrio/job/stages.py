@@ -125,6 +125,8 @@ def prepare(stack: ExposureStack, plan: MergePlan) -> Prepared:
         raise ValueError("--exposures-from-data needs three brackets or more, and no --nd "
                          f"(the filters are measured on their own); got {stack.count} "
                          "brackets" + (" and --nd" if filtered is not None else ""))
+    # The brackets' encoding, known and one for all, before any work on their pixels.
+    resolve_encoding(stack.files, stack.metadata or [{}] * stack.count, options.input_encoding)
     masks = read_masks(options.masks, stack.files, stack.shape[:2])  # in the stack's order
     return Prepared(stack, filtered, inferring, masks, exclusions(stack, plan, masks))
 
