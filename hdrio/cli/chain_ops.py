@@ -81,19 +81,18 @@ def read_input(chain: Chain, path: Path) -> None:
         chain.brackets.extend(files)
         return
     from hdrio.io.header import read_typed_attributes
-    from hdrio.io.images import part_names, read_image, read_layout, read_other_channels
+    from hdrio.io.images import read_image, read_layout
 
-    parts = part_names(path)
-    if len(parts) > 1:
-        named = ", ".join(name or "unnamed" for name in parts)
-        chain.note(f"{path}: {len(parts)} parts ({named}); the chain reads and writes the "
-                   "first alone")
+    layout = read_layout(path)
+    if len(layout.parts) > 1:
+        named = ", ".join(name or "unnamed" for name in layout.parts)
+        chain.note(f"{path}: {len(layout.parts)} parts ({named}); the chain reads and "
+                   "writes the first alone")
     pixels, alpha = read_image(path, say=chain.note, alpha=True)
     attributes = {name: value for name, value in read_typed_attributes(path).items()
                   if not name.startswith(_LAYOUT_PREFIXES)}
-    window, pixel_type = read_layout(path)
-    image = Image(pixels, attributes, str(path), alpha=alpha,
-                  channels=read_other_channels(path), window=window, pixel_type=pixel_type)
+    image = Image(pixels, attributes, str(path), alpha=alpha, channels=layout.channels,
+                  window=layout.window, pixel_type=layout.pixel_type)
     image.display = image.attribute("hdrio:units") == "display-referred"
     image.scale = float(image.attribute("hdrio:exposureScale", 1.0))  # type: ignore[arg-type]
     chain.images.append(image)

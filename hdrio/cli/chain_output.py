@@ -181,9 +181,7 @@ def _info(chain: Chain, _values: list[str]) -> None:
     kind = "display-referred (sRGB)" if image.display else "scene-linear"
     carried = (["alpha"] if image.alpha is not None else []) + list(image.layers) + list(
         image.channels)
-    window = image.window
-    place = "" if window is None else (f" at ({window.x}, {window.y}) of a "
-                                       f"{window.full_width}x{window.full_height} frame")
+    place = "" if image.window is None else f" {image.window}"
     chain.say(f"{image.label}: {width}x{height}{place}, {channels} channels, {kind}"
               + (f"; with {', '.join(carried)}" if carried else ""))
     for name in ("hdrio:responseMethod", "hdrio:exposureSource", "hdrio:mergeDomain"):

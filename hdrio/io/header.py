@@ -6,6 +6,7 @@ from pathlib import Path
 
 from hdrio.errors import InputError, library_message
 from hdrio.io.paths import check_input
+from hdrio.io.write import Window
 
 
 def read_header(path: str | Path) -> dict[str, object]:
@@ -22,12 +23,10 @@ def read_header(path: str | Path) -> dict[str, object]:
             raise InputError(path, f"cannot read header ({library_message(oiio.geterror)})")
         try:
             spec = image.spec()
+            window = Window.of(spec)
             header: dict[str, object] = {
                 ".resolution": f"{spec.width}x{spec.height}" + (
-                    "" if (spec.x, spec.y, spec.full_x, spec.full_y, spec.full_width,
-                           spec.full_height) == (0, 0, 0, 0, spec.width, spec.height)
-                    else f" at ({spec.x}, {spec.y}) of a {spec.full_width}x"
-                         f"{spec.full_height} frame"),
+                    "" if window is None else f" {window}"),
                 ".channels": ",".join(spec.channelnames),
                 ".format": str(spec.format),
             }

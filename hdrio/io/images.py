@@ -4,6 +4,7 @@ rule (:func:`replace_non_finite`)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -62,31 +63,25 @@ def _channel(image, spec, index: int, path: Path) -> np.ndarray:
     return np.asarray(values, dtype=np.float32).reshape(spec.height, spec.width, 1)
 
 
-def read_other_channels(path: str | Path) -> dict[str, np.ndarray]:
-    """Every channel of ``path`` but the colour :func:`read_image` reads and alpha, by
-    its name, each ``(H, W, 1)`` float32: an EXR's layers (hdrio's ``motion.Y`` and
-    ``uncertainty.R``, a renderer's ``Z`` and ``N.X``...), which the chain carries along
-    and writes back."""
-    import OpenImageIO as oiio
+@dataclass(frozen=True)
+class Layout:
+    """What an image file holds besides the colour and alpha :func:`read_image` reads.
 
-    image = oiio.ImageInput.open(str(path))
-    if image is None:
-        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
-    try:
-        spec = image.spec()
-        names = list(spec.channelnames)
-        colour = 3 if spec.nchannels >= 3 else 1
-        return {name: _channel(image, spec, index, Path(path))
-                for index, name in enumerate(names)
-                if index >= colour and name != "A"}
-    finally:
-        image.close()
+    ``channels``: the first part's other channels by name, each ``(H, W, 1)`` float32
+    (an EXR's layers: hdrio's ``motion.Y`` and ``uncertainty.R``, a renderer's ``Z`` and
+    ``N.X``...); ``window``: its :class:`hdrio.io.write.Window` (``None`` where its
+    pixels are the whole frame); ``pixel_type``: ``"half"`` where every channel is half,
+    else ``"float"``; ``parts``: the name of every part (an OpenEXR multi-part file's,
+    OpenImageIO's subimages), ``""`` where one has none."""
+
+    channels: dict[str, np.ndarray]
+    window: object
+    pixel_type: str
+    parts: list[str]
 
 
-def read_layout(path: str | Path):
-    """``(window, pixel_type)`` of the first part of ``path``: its
-    :class:`hdrio.io.write.Window` (``None`` where its pixels are the whole frame) and
-    ``"half"`` where every channel is half, else ``"float"``."""
+def read_layout(path: str | Path) -> Layout:
+    """The :class:`Layout` of ``path``, read in one opening of the file."""
     import OpenImageIO as oiio
 
     from hdrio.io.write import Window
@@ -96,26 +91,16 @@ def read_layout(path: str | Path):
         raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
     try:
         spec = image.spec()
-        formats = [str(f) for f in (spec.channelformats or [spec.format])]
-        return Window.of(spec), "half" if set(formats) == {"half"} else "float"
-    finally:
-        image.close()
-
-
-def part_names(path: str | Path) -> list[str]:
-    """The names of the parts of ``path`` (an OpenEXR multi-part file's; OpenImageIO's
-    subimages), in order, ``""`` where a part has none; one entry for a plain image."""
-    import OpenImageIO as oiio
-
-    image = oiio.ImageInput.open(str(path))
-    if image is None:
-        raise InputError(path, f"cannot read image ({library_message(oiio.geterror)})")
-    try:
-        names, part = [], 0
-        while image.seek_subimage(part, 0):
-            names.append(image.spec().get_string_attribute("name"))
-            part += 1
-        return names
+        colour = 3 if spec.nchannels >= 3 else 1
+        channels = {name: _channel(image, spec, index, Path(path))
+                    for index, name in enumerate(spec.channelnames)
+                    if index >= colour and name != "A"}
+        formats = {str(f) for f in (spec.channelformats or [spec.format])}
+        window = Window.of(spec)
+        parts = []
+        while image.seek_subimage(len(parts), 0):
+            parts.append(image.spec().get_string_attribute("name"))
+        return Layout(channels, window, "half" if formats == {"half"} else "float", parts)
     finally:
         image.close()
 

@@ -53,6 +53,9 @@ class Window:
         plain = cls(0, 0, 0, 0, spec.width, spec.height)
         return None if window == plain else window
 
+    def __str__(self) -> str:
+        return f"at ({self.x}, {self.y}) of a {self.full_width}x{self.full_height} frame"
+
     def scaled(self, x_factor: float, y_factor: float) -> Window:
         """The window of the image resized by these factors (the frame with it)."""
         return Window(round(self.x * x_factor), round(self.y * y_factor),
@@ -319,7 +322,7 @@ def write_exr(path: str | Path, rgb: np.ndarray, attributes: Mapping[str, object
     ``layers``: extra images of the same size (``(H, W, k)``), written unscaled as the
     channels ``name.R``, ``name.G``, ``name.B`` (``name.Y`` for one channel) after the
     image's own; ``channels``: single channels (``(H, W, 1)``) written unscaled under
-    their own names after those (an input's layers, :func:`hdrio.io.images.read_other_channels`);
+    their own names after those (an input's layers, :func:`hdrio.io.images.read_layout`);
     ``window``: the pixels' place in a larger frame (:class:`Window`).
     """
     if pixel_type not in ("half", "float"):
