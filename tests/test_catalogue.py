@@ -53,6 +53,11 @@ def _heic(d: Path, name: str) -> Path:
     return path
 
 
+def _upper_case(d: Path) -> list[Path]:
+    """The ramp set as a camera names its files: ``.PNG``."""
+    return [path.rename(path.with_suffix(".PNG")) for path in _rgb(d)]
+
+
 def _twice(d: Path) -> list[object]:
     images = _rgb(d)
     return h.merge(d, [images[0], *images])
@@ -219,6 +224,13 @@ CASES = [
          "a.heic: HEIC (HEIF) is not a format hdrio reads: export the brackets as TIFF"),
     Case("pattern matching nothing", lambda d: h.merge(d, [*_rgb(d), d / "in" / "*.tif"]),
          2, "*.tif: no such file, and as a pattern it matches none"),
+    Case("pattern in the other letter case",
+         lambda d: _upper_case(d) and h.merge(d, [d / "in" / "*.png"]), 2,
+         "as a pattern it matches none (letter case counts: ignoring it, it matches "
+         "bracket_1_1.PNG and 3 more; give "),
+    Case("name in the other letter case",
+         lambda d: h.merge(d, [*(p.with_suffix(".png") for p in _upper_case(d))]), 2,
+         "PNG is there: letter case counts in file names here"),
     Case("symlink loop input", lambda d: h.merge(d, [*_rgb(d), h.symlink_loop(d / "in")]), 2,
          "symbolic links"),
     Case("input name over 255 bytes", _long_input, 2, "name too long"),

@@ -14,6 +14,7 @@ Output name patterns (``-o '{first_stem}_hdr.exr'``) are filled here too
 from __future__ import annotations
 
 import errno
+import fnmatch
 import glob
 import os
 import re
@@ -60,7 +61,8 @@ def check_input(path: str | Path, what: str = IMAGE) -> os.stat_result:
     try:
         info = os.stat(path)
     except OSError as error:
-        raise InputError(path, _problem(error)) from None
+        hint = _other_case(str(path), literal=True) if error.errno == errno.ENOENT else ""
+        raise InputError(path, _problem(error) + hint) from None
     if stat.S_ISDIR(info.st_mode):
         hint = f": name its files (e.g. '{Path(path) / '*.jpg'}')" if what == IMAGE else ""
         raise InputError(path, f"is a folder, not {what}{hint}")
@@ -86,11 +88,48 @@ def expand_patterns(paths: Iterable[str | Path]) -> list[str | Path]:
         if any(c in name for c in PATTERN_CHARACTERS) and not os.path.lexists(name):
             matches = sorted(glob.glob(name))
             if not matches:
-                raise InputError(path, "no such file, and as a pattern it matches none")
+                raise InputError(path, "no such file, and as a pattern it matches none"
+                                 + _other_case(name))
             expanded.extend(matches)
         else:
             expanded.append(path)
     return expanded
+
+
+def _other_case(name: str, literal: bool = False) -> str:
+    """A hint for a name that finds no file, as a shell pattern or (``literal``) as it
+    is: the files its last part finds in its folder when letter case is ignored (a
+    camera's ``IMG_0959.JPG`` for ``*.jpg`` or ``img_0959.jpg``), where that folder is
+    no pattern; empty when none does. (Linux and most Unix file systems tell ``.jpg``
+    from ``.JPG``; Windows and macOS by default do not.)"""
+    folder, base = os.path.split(name)
+    if not literal and any(c in folder for c in PATTERN_CHARACTERS):
+        return ""
+    try:
+        names = os.listdir(folder or ".")
+    except OSError:
+        return ""
+    matcher = re.compile(re.escape(base) + r"\Z" if literal else fnmatch.translate(base),
+                         re.IGNORECASE)
+    found = sorted(entry for entry in names if matcher.match(entry))
+    if not found:
+        return ""
+    if literal:
+        return f" ({found[0]} is there: letter case counts in file names here)"
+    more = f" and {len(found) - 1} more" if len(found) > 1 else ""
+    return (f" (letter case counts: ignoring it, it matches {found[0]}{more}; give "
+            f"{os.path.join(folder, _case_of(base, found[0]))})")
+
+
+def _case_of(pattern: str, name: str) -> str:
+    """``pattern`` with each letter outside brackets in the case of ``name``'s suffix
+    where it has one (``*.jpg`` and ``IMG_0959.JPG``: ``*.JPG``), else as it is."""
+    stem, dot, suffix = pattern.rpartition(".")
+    name_suffix = name.rpartition(".")[2]
+    if dot and suffix.lower() == name_suffix.lower() and not any(
+            c in suffix for c in PATTERN_CHARACTERS):
+        return f"{stem}.{name_suffix}"
+    return pattern
 
 
 def check_inputs(paths: Sequence[str | Path], what: str = IMAGE) -> list[Path]:
