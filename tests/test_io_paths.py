@@ -48,3 +48,26 @@ def test_patterns_take_plain_fields_only(text, fragment):
     with pytest.raises(OutputError, match=fragment.replace("{", r"\{")):
         fill_pattern(text, {"first_stem": "a"})
     assert str(fill_pattern("{first_stem}_hdr.exr", {"first_stem": "a"})) == "a_hdr.exr"
+
+
+def test_a_name_in_another_letter_case_is_named(tmp_path):
+    # Linux tells IMG_0959.JPG from *.jpg; the error says what would match, and a pattern
+    # to give only where that pattern matches every such file (case counts).
+    from hdrio.io.paths import check_input, expand_patterns
+
+    for name in ("IMG_0959.JPG", "IMG_0960.JPG"):
+        (tmp_path / name).write_bytes(b"")
+    with pytest.raises(InputError, match=r"matches none \(letter case counts: ignoring it, "
+                       r"it matches IMG_0959\.JPG and 1 more; give .*\*\.JPG\)"):
+        expand_patterns([str(tmp_path / "*.jpg")])
+    # The stem's case is wrong too: no pattern offered that would not match.
+    with pytest.raises(InputError) as refused:
+        expand_patterns([str(tmp_path / "img_*.jpg")])
+    assert "it matches IMG_0959.JPG and 1 more)" in str(refused.value)
+    with pytest.raises(InputError, match=r"no such file \(IMG_0960\.JPG is there: letter "
+                       r"case counts"):
+        check_input(tmp_path / "img_0960.jpg")
+    # Nothing like it in any case: the plain message.
+    with pytest.raises(InputError) as plain:
+        expand_patterns([str(tmp_path / "*.png")])
+    assert str(plain.value).endswith("as a pattern it matches none")

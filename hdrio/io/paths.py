@@ -117,17 +117,18 @@ def _other_case(name: str, literal: bool = False) -> str:
     if literal:
         return f" ({found[0]} is there: letter case counts in file names here)"
     more = f" and {len(found) - 1} more" if len(found) > 1 else ""
-    return (f" (letter case counts: ignoring it, it matches {found[0]}{more}; give "
-            f"{os.path.join(folder, _case_of(base, found[0]))})")
+    suggested = _with_suffix_of(base, found[0])
+    give = (f"; give {os.path.join(folder, suggested)}"
+            if all(fnmatch.fnmatchcase(entry, suggested) for entry in found) else "")
+    return f" (letter case counts: ignoring it, it matches {found[0]}{more}{give})"
 
 
-def _case_of(pattern: str, name: str) -> str:
-    """``pattern`` with each letter outside brackets in the case of ``name``'s suffix
-    where it has one (``*.jpg`` and ``IMG_0959.JPG``: ``*.JPG``), else as it is."""
+def _with_suffix_of(pattern: str, name: str) -> str:
+    """``pattern`` with its suffix written as ``name``'s where the two differ only in
+    letter case (``*.jpg`` and ``IMG_0959.JPG``: ``*.JPG``), else as it is."""
     stem, dot, suffix = pattern.rpartition(".")
     name_suffix = name.rpartition(".")[2]
-    if dot and suffix.lower() == name_suffix.lower() and not any(
-            c in suffix for c in PATTERN_CHARACTERS):
+    if dot and suffix.lower() == name_suffix.lower():
         return f"{stem}.{name_suffix}"
     return pattern
 
