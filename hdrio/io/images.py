@@ -51,16 +51,18 @@ def replace_non_finite(pixels: np.ndarray, source: str = "image"
     return out, note
 
 
-def _channel(image, spec, index: int, path: Path) -> np.ndarray:
-    """Channel ``index`` of ``path``, open as OpenImageIO's ``image``, ``(H, W, 1)``
-    float32."""
+def _channels(image, spec, first: int, stop: int, path: Path) -> np.ndarray:
+    """Channels ``first .. stop - 1`` of ``path``, open as OpenImageIO's ``image``,
+    ``(H, W, stop - first)`` float32."""
     import OpenImageIO as oiio
 
-    values = image.read_image(0, 0, index, index + 1, oiio.FLOAT)
+    values = image.read_image(0, 0, first, stop, oiio.FLOAT)
     if values is None or image.has_error:
-        raise InputError(path, f"cannot decode channel {spec.channelnames[index]} "
+        named = ", ".join(spec.channelnames[first:stop])
+        raise InputError(path, f"cannot decode channel {named} "
                                f"({library_message(image.geterror)})")
-    return np.asarray(values, dtype=np.float32).reshape(spec.height, spec.width, 1)
+    return np.asarray(values, dtype=np.float32).reshape(spec.height, spec.width,
+                                                        stop - first)
 
 
 @dataclass(frozen=True)
@@ -92,9 +94,14 @@ def read_layout(path: str | Path) -> Layout:
     try:
         spec = image.spec()
         colour = 3 if spec.nchannels >= 3 else 1
-        channels = {name: _channel(image, spec, index, Path(path))
-                    for index, name in enumerate(spec.channelnames)
-                    if index >= colour and name != "A"}
+        names = list(spec.channelnames)[colour:]
+        channels: dict[str, np.ndarray] = {}
+        if any(name != "A" for name in names):
+            # One read for them all: read one by one, every compressed block of the file
+            # was decoded again for each channel.
+            rest = _channels(image, spec, colour, spec.nchannels, Path(path))
+            channels = {name: rest[..., k:k + 1] for k, name in enumerate(names)
+                        if name != "A"}
         formats = {str(f) for f in (spec.channelformats or [spec.format])}
         window = Window.of(spec)
         parts = []
@@ -130,7 +137,8 @@ def read_image(path: str | Path, say=None, alpha: bool = False):
         names = list(spec.channelnames)
         opacity = None
         if alpha and "A" in names:
-            opacity = _channel(image, spec, names.index("A"), path)
+            index = names.index("A")
+            opacity = _channels(image, spec, index, index + 1, path)
     finally:
         image.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, channels)
